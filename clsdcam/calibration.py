@@ -1,0 +1,221 @@
+"""Calibration: the PSF, the filter function and the band wavelengths; loading and preprocessing.
+
+Layouts read:
+- the paper's ``calibration.mat``: ``psf`` (H,W), ``mask`` (H,W,K), ``wavs`` (1,K) or (K,1),
+  in MATLAB v5 (scipy.io) or v7.3 (HDF5; MATLAB stores arrays transposed, undone here);
+- our HDF5: ``psf`` (H,W), ``filters`` (K,H,W), ``wavelengths`` (K,).
+Inside, filters are (K,H,W) (see DESIGN.md); the file's (H,W,K) is converted at load time.
+
+Preprocessing (each step an option, the reference set in :meth:`Preprocessing.reference`):
+crop a window of calibration and measurement, drop the last band, zero the 4×4 defective
+block around the brightest pixel of Σ_k F_k (in filters and measurement), PSF → PSF/‖PSF‖₂,
+filters → F/max F.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .io import as_real_array, atomic_output, existing_file, first_line, require_finite
+
+REFERENCE_CROP = (100, 420, 80, 540)  # rows 100:420, cols 80:540 of the 494×659 raw frame
+DEFECT_HALF = 2                        # the reference zeroes [i−2:i+2, j−2:j+2]
+
+
+@dataclass
+class Calibration:
+    """psf (H,W), filters (K,H,W), wavelengths (K,) in nm, and where they came from."""
+
+    psf: np.ndarray
+    filters: np.ndarray
+    wavelengths: np.ndarray
+    source: str = "memory"
+
+    def __post_init__(self):
+        self.psf = require_finite(as_real_array(self.psf, f"{self.source}: psf"), f"{self.source}: psf")
+        self.filters = require_finite(as_real_array(self.filters, f"{self.source}: filters"), f"{self.source}: filters")
+        self.wavelengths = require_finite(as_real_array(self.wavelengths, f"{self.source}: wavelengths"),
+                                          f"{self.source}: wavelengths").ravel()
+        self._check_shapes()
+
+    def _check_shapes(self):
+        src, psf, filters = self.source, self.psf, self.filters
+        if psf.ndim != 2 or min(psf.shape) < 1:
+            raise InputError(f"{src}: psf must be a 2-D image, found shape {psf.shape}")
+        if filters.ndim != 3 or filters.shape[1:] != psf.shape:
+            raise InputError(f"{src}: filters {filters.shape} do not match psf {psf.shape} "
+                             f"(expected (K, {psf.shape[0]}, {psf.shape[1]}))")
+        if self.wavelengths.shape != (filters.shape[0],):
+            raise InputError(f"{src}: {self.wavelengths.size} wavelengths for {filters.shape[0]} bands")
+        if not np.any(psf):
+            raise InputError(f"{src}: the psf is all zeros")
+        if not np.any(filters):
+            raise InputError(f"{src}: the filters are all zeros")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.psf.shape)
+
+    @property
+    def n_bands(self) -> int:
+        return self.filters.shape[0]
+
+    @classmethod
+    def load(cls, path) -> "Calibration":
+        """Read the paper's ``calibration.mat`` (v5 or v7.3) or our HDF5 layout."""
+        path = existing_file(path, "calibration")
+        arrays = _read_mat_v5(path) if _is_mat_v5(path) else _read_hdf5_calibration(path)
+        return cls(*arrays, source=str(path))
+
+    def save(self, path) -> Path:
+        """Write our HDF5 layout atomically."""
+        import h5py
+
+        path = Path(path)
+        with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
+            f["psf"] = self.psf.astype(np.float32)
+            f["filters"] = self.filters.astype(np.float32)
+            f["wavelengths"] = self.wavelengths.astype(np.float64)
+            f.attrs["source"] = self.source
+        return path
+
+
+# ---- file layouts ---------------------------------------------------------------------------
+def _is_mat_v5(path: Path) -> bool:
+    """MATLAB v5 files start with a 116-byte text header 'MATLAB 5.0 MAT-file'; v7.3 is HDF5."""
+    with open(path, "rb") as f:
+        head = f.read(128)
+    return head.startswith(b"MATLAB") and b"MATLAB 7.3" not in head
+
+
+def _read_mat_v5(path: Path):
+    import scipy.io
+
+    try:
+        contents = scipy.io.loadmat(path)
+    except Exception as exc:  # scipy raises ValueError/TypeError/OSError/MatReadError on bad files
+        raise InputError(f"calibration {path}: not a readable MATLAB file ({first_line(exc)})") from None
+    return _paper_layout(path, contents)
+
+
+def _read_hdf5_calibration(path: Path):
+    """Our layout (``filters`` (K,H,W)) or a MATLAB v7.3 file (``mask``, transposed by MATLAB)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            if "filters" in f:
+                return tuple(_dataset(path, f, key) for key in ("psf", "filters", "wavelengths"))
+            contents = {key: _dataset(path, f, key).T for key in ("psf", "mask", "wavs") if key in f}
+            contents["__keys__"] = list(f.keys())
+    except (OSError, ValueError, TypeError) as exc:
+        raise InputError(f"calibration {path}: neither a MATLAB nor an HDF5 file ({first_line(exc)})") from None
+    return _paper_layout(path, contents)
+
+
+def _dataset(path, f, key):
+    import h5py
+
+    if key not in f or not isinstance(f[key], h5py.Dataset):
+        raise InputError(f"calibration {path}: no dataset {key!r} (found: {', '.join(sorted(f.keys()))})")
+    return f[key][...]
+
+
+def _paper_layout(path, contents: dict):
+    """(psf, filters (K,H,W), wavelengths) from ``psf`` (H,W), ``mask`` (H,W,K), ``wavs`` (1,K)."""
+    missing = [key for key in ("psf", "mask", "wavs") if key not in contents]
+    if missing:
+        found = [k for k in contents.get("__keys__", contents) if not k.startswith("__")]
+        raise InputError(f"calibration {path}: missing {', '.join(missing)} (found: {', '.join(found) or 'nothing'})")
+    mask = as_real_array(contents["mask"], f"calibration {path}: mask")
+    if mask.ndim == 2:  # one band saved without its trailing axis
+        mask = mask[:, :, None]
+    if mask.ndim != 3:
+        raise InputError(f"calibration {path}: mask must be (H, W, K), found shape {mask.shape}")
+    return contents["psf"], np.moveaxis(mask, -1, 0), np.ravel(contents["wavs"])
+
+
+# ---- preprocessing ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Preprocessing:
+    """Which preprocessing steps to apply; the defaults suit an already-cropped calibration."""
+
+    crop: tuple[int, int, int, int] | None = None  # (y0, y1, x0, x1), half-open
+    normalize_psf: bool = True
+    normalize_filters: bool = True
+    zero_defect: bool = False
+    drop_last_band: bool = False
+
+    @classmethod
+    def reference(cls) -> "Preprocessing":
+        """The authors' published preprocessing of ``calibration.mat`` and their raw frames."""
+        return cls(crop=REFERENCE_CROP, zero_defect=True, drop_last_band=True)
+
+
+def parse_crop(text: str) -> tuple[int, int, int, int]:
+    """``"Y0:Y1,X0:X1"`` → (y0, y1, x0, x1), or InputError."""
+    try:
+        rows, cols = text.split(",")
+        (y0, y1), (x0, x1) = (tuple(int(v) for v in part.split(":")) for part in (rows, cols))
+    except ValueError:
+        raise InputError(f"--crop {text!r}: expected Y0:Y1,X0:X1, e.g. 100:420,80:540") from None
+    if not (0 <= y0 < y1 and 0 <= x0 < x1):
+        raise InputError(f"--crop {text!r}: need 0 ≤ Y0 < Y1 and 0 ≤ X0 < X1")
+    return (y0, y1, x0, x1)
+
+
+def preprocess(calibration: Calibration, measurement: np.ndarray, options: Preprocessing):
+    """Apply ``options`` to a calibration and its measurement; returns both, new arrays.
+
+    A measurement whose shape differs from the calibration is rejected unless a crop is given,
+    in which case both must contain the crop window (the raw frame may be larger).
+    """
+    psf, filters, b = calibration.psf, calibration.filters, np.asarray(measurement, np.float64)
+    if options.crop is not None:
+        window = _crop_window(options.crop, calibration, b)
+        psf, filters, b = psf[window], filters[(slice(None),) + window], b[window]
+    elif b.shape != psf.shape:
+        raise InputError(f"measurement {_shape(b.shape)} does not match calibration {_shape(psf.shape)} "
+                         f"({calibration.source}); give --crop Y0:Y1,X0:X1")
+    wavelengths = calibration.wavelengths
+    if options.drop_last_band:
+        if filters.shape[0] < 2:
+            raise InputError(f"{calibration.source}: cannot drop the last of {filters.shape[0]} band")
+        filters, wavelengths = filters[:-1], wavelengths[:-1]
+    if options.zero_defect:
+        filters, b = zero_defect_block(filters, b)
+    if options.normalize_psf:
+        psf = psf / np.linalg.norm(psf)
+    if options.normalize_filters:
+        filters = filters / np.max(filters)
+    out = replace(calibration, psf=psf, filters=filters, wavelengths=wavelengths)
+    return out, b
+
+
+def _crop_window(crop, calibration: Calibration, b: np.ndarray) -> tuple[slice, slice]:
+    y0, y1, x0, x1 = crop
+    for name, shape in (("calibration", calibration.shape), ("measurement", b.shape)):
+        if y1 > shape[0] or x1 > shape[1]:
+            raise InputError(f"--crop {y0}:{y1},{x0}:{x1} lies outside the {name} {_shape(shape)}")
+    return slice(y0, y1), slice(x0, x1)
+
+
+def zero_defect_block(filters: np.ndarray, b: np.ndarray):
+    """Zero the 4×4 block [i−2:i+2, j−2:j+2] at (i, j) = argmax Σ_k F_k in filters and measurement.
+
+    The prototype has a defective, over-bright pixel cluster in its calibration; the authors
+    remove it from both the filter function and the data.
+    """
+    i, j = np.unravel_index(np.argmax(filters.sum(axis=0)), filters.shape[1:])
+    block = (slice(max(i - DEFECT_HALF, 0), i + DEFECT_HALF), slice(max(j - DEFECT_HALF, 0), j + DEFECT_HALF))
+    filters, b = filters.copy(), b.copy()
+    filters[(slice(None),) + block] = 0
+    b[block] = 0
+    return filters, b
+
+
+def _shape(shape) -> str:
+    return "×".join(str(n) for n in shape)

@@ -1,0 +1,192 @@
+"""Files: measurements in (PNG/TIFF 8/16-bit, .npy, .h5), cubes out (HDF5), atomic writes.
+
+Every reader turns a missing, empty, truncated or wrongly shaped file into an ``InputError``
+that names the file; every writer goes through :func:`atomic_output`, so a failure or a kill
+leaves either the old file or the new one, never a partial one.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import secrets
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff")
+
+
+# ---- atomic writes ----------------------------------------------------------------------
+@contextlib.contextmanager
+def atomic_output(path):
+    """Yield a temporary path next to ``path`` (same suffix); rename it onto ``path`` on success.
+
+    The temporary name is ``.NAME.RANDOM.SUFFIX`` in the same directory, so the rename is
+    atomic on POSIX; on any exception (or KeyboardInterrupt) the temporary file is removed.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        raise
+
+
+# ---- reading helpers ----------------------------------------------------------------------
+def existing_file(path, what: str) -> Path:
+    """``path`` as a Path, or InputError if it is missing, a directory or empty."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{what} {path}: no such file")
+    if not path.is_file():
+        raise InputError(f"{what} {path}: not a file")
+    if path.stat().st_size == 0:
+        raise InputError(f"{what} {path}: empty file")
+    return path
+
+
+def require_finite(array: np.ndarray, name: str) -> np.ndarray:
+    """``array`` unchanged, or InputError with the count and first position of NaN/Inf values."""
+    bad = ~np.isfinite(array)
+    if bad.any():
+        first = ", ".join(str(int(i)) for i in np.argwhere(bad)[0])
+        raise InputError(f"{name}: {int(bad.sum())} non-finite values (NaN/Inf), first at ({first})")
+    return array
+
+
+def as_real_array(data, name: str) -> np.ndarray:
+    """A float64 copy of numeric (bool/int/float) data, or InputError naming the dtype."""
+    array = np.asarray(data)
+    if array.dtype.kind not in "biuf":
+        raise InputError(f"{name}: expected real numbers, found dtype {array.dtype}")
+    return array.astype(np.float64)
+
+
+def read_h5_dataset(path: Path, key: str, what: str) -> np.ndarray:
+    """Dataset ``key`` of an HDF5 file, or InputError (not HDF5, truncated, key missing)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            if key not in f or not isinstance(f[key], h5py.Dataset):
+                raise InputError(f"{what} {path}: no dataset {key!r} (found: {', '.join(sorted(f.keys())) or 'none'})")
+            return f[key][...]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{what} {path}: not a readable HDF5 file ({first_line(exc)})") from None
+
+
+def first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+# ---- measurements -------------------------------------------------------------------------
+def load_measurement(path) -> np.ndarray:
+    """A raw sensor frame (H, W) float64, as stored (8/16-bit images are not rescaled).
+
+    PNG/TIFF: 8- or 16-bit grey (a colour image is rejected); ``.npy``: a 2-D numeric array;
+    ``.h5``/``.hdf5``: dataset ``measurement``. NaN/Inf values are rejected with their count
+    and first position.
+    """
+    path = existing_file(path, "measurement")
+    suffix = path.suffix.lower()
+    if suffix in IMAGE_SUFFIXES:
+        data = _read_image(path)
+    elif suffix == ".npy":
+        data = _read_npy(path)
+    elif suffix in (".h5", ".hdf5"):
+        data = read_h5_dataset(path, "measurement", "measurement")
+    else:
+        raise InputError(f"measurement {path}: unknown format {suffix!r} (expected .png, .tif, .npy or .h5)")
+    frame = as_real_array(data, f"measurement {path}")
+    if frame.ndim != 2:
+        raise InputError(f"measurement {path}: expected a 2-D grey image, found shape {frame.shape}")
+    return require_finite(frame, f"measurement {path}")
+
+
+def _read_image(path: Path) -> np.ndarray:
+    """8/16-bit grey PNG or TIFF as an integer array (PIL for PNG, tifffile for TIFF)."""
+    try:
+        if path.suffix.lower() == ".png":
+            from PIL import Image
+
+            with Image.open(path) as image:
+                return np.asarray(image)
+        import tifffile
+
+        return tifffile.imread(path)
+    except Exception as exc:  # the imaging libraries raise many types for corrupt files
+        raise InputError(f"measurement {path}: not a readable image ({first_line(exc)})") from None
+
+
+def _read_npy(path: Path) -> np.ndarray:
+    try:
+        return np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise InputError(f"measurement {path}: not a readable .npy array ({first_line(exc)})") from None
+
+
+def save_measurement(path, frame: np.ndarray) -> Path:
+    """Write a frame as ``.npy`` or ``.h5`` (dataset ``measurement``), atomically."""
+    path = Path(path)
+    with atomic_output(path) as tmp:
+        if path.suffix.lower() == ".npy":
+            with open(tmp, "wb") as f:
+                np.save(f, np.asarray(frame, np.float32))
+        else:
+            import h5py
+
+            with h5py.File(tmp, "w") as f:
+                f["measurement"] = np.asarray(frame, np.float32)
+    return path
+
+
+# ---- cubes --------------------------------------------------------------------------------
+def write_cube(path, cube, wavelengths, history=(), attrs=None, full_field=None) -> Path:
+    """OUT.h5: ``cube`` (K,H,W) float32, ``wavelengths`` (K,), group ``history`` (one dataset per
+    record key, one entry per iteration), attributes ``attrs``; optional ``full_field``."""
+    import h5py
+
+    path = Path(path)
+    with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
+        f["cube"] = np.asarray(cube, np.float32)
+        f["wavelengths"] = np.asarray(wavelengths, np.float64)
+        if full_field is not None:
+            f["full_field"] = np.asarray(full_field, np.float32)
+        group = f.create_group("history")
+        for key in (history[0].keys() if history else ()):
+            group[key] = np.array([record[key] for record in history])
+        for key, value in (attrs or {}).items():
+            f.attrs[key] = _attribute(value)
+    return path
+
+
+def _attribute(value):
+    """HDF5-storable form of a setting: None → "", tuples → arrays, the rest as is."""
+    if value is None:
+        return ""
+    if isinstance(value, (tuple, list)):
+        return np.asarray(value)
+    return value
+
+
+def read_cube(path) -> dict:
+    """{'cube', 'wavelengths', 'history', 'attrs'} from a file written by :func:`write_cube`
+    (or any HDF5 file with a 3-D ``cube`` dataset, e.g. the simulator's ``truth.h5``)."""
+    import h5py
+
+    path = existing_file(path, "cube")
+    cube = read_h5_dataset(path, "cube", "cube")
+    if cube.ndim != 3:
+        raise InputError(f"cube {path}: expected (K, H, W), found shape {cube.shape}")
+    with h5py.File(path, "r") as f:
+        wavelengths = f["wavelengths"][...] if "wavelengths" in f else np.arange(cube.shape[0], dtype=float)
+        history = {k: v[...] for k, v in f["history"].items()} if "history" in f else {}
+        attrs = dict(f.attrs)
+    return {"cube": cube, "wavelengths": wavelengths, "history": history, "attrs": attrs}

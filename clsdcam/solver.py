@@ -1,0 +1,213 @@
+"""Reconstruction: one measurement + a calibration -> a hyperspectral cube.
+
+    argmin_{v ≥ 0} ½‖b − Av‖² + τ₁·TV_w(v) + τ₂·‖V‖_* + τ₃·‖v‖₁     by FISTA with step 1/L.
+
+Units. The measurement is used as given. Internally it is divided by s = max|b|, and the
+user's weights are relative: τ₁ and τ₃ are fractions of ‖Aᵀb‖_∞ (the weight above which
+an L1 prior would zero the cube), τ₂ a fraction of σ₁(Aᵀb), the largest singular value of
+the pixels×bands unfolding of Aᵀb. So scaling the measurement by s scales the cube by s,
+and the same weights suit any PSF or filter normalisation.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from . import __version__
+from .backends import get_backend
+from .errors import InputError
+from .fista import fista
+from .model import ForwardModel
+from .priors import Prox, Regularizer, singular_values
+
+DEFAULT_ITERS = 300
+DEFAULT_TV = 1e-3  # tuned on the simulated target and LED scenes (README, "Choosing --tv")
+DEFAULT_TOL = 0.0
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Solver settings; weights are relative to the data (see the module docstring)."""
+
+    iters: int = DEFAULT_ITERS
+    tv: float = DEFAULT_TV
+    tv_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)  # x, y, λ
+    lowrank: float = 0.0
+    l1: float = 0.0
+    tol: float = DEFAULT_TOL
+    dtype: str = "float32"
+    objective_every: int = 10
+    full_field: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "tv_weights", tuple(float(w) for w in self.tv_weights))
+        _require(isinstance(self.iters, (int, np.integer)) and self.iters >= 1, f"--iters {self.iters}: must be an integer ≥ 1")
+        for name in ("tv", "lowrank", "l1", "tol"):
+            value = getattr(self, name)
+            _require(_finite_nonneg(value), f"--{name} {value}: must be a finite number ≥ 0")
+        _require(len(self.tv_weights) == 3 and all(_finite_nonneg(w) for w in self.tv_weights),
+                 f"--tv-weights {self.tv_weights}: expected three finite numbers ≥ 0 (x, y, λ)")
+        _require(self.objective_every >= 1, f"objective_every {self.objective_every}: must be ≥ 1")
+
+
+def _finite_nonneg(value) -> bool:
+    return isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value >= 0
+
+
+def _require(condition: bool, message: str):
+    if not condition:
+        raise InputError(message)
+
+
+@dataclass
+class Result:
+    cube: np.ndarray               # (K, H, W) float32, the sensor window
+    wavelengths: np.ndarray        # (K,)
+    history: list[dict]
+    attrs: dict
+    full_field: np.ndarray | None = None
+    snapshots: dict[int, np.ndarray] = field(default_factory=dict)  # iteration -> (K, H, W) cube
+
+    @property
+    def iterations(self) -> int:
+        return int(self.attrs["iterations"])
+
+    @property
+    def stop_reason(self) -> str:
+        return str(self.attrs["stop_reason"])
+
+    def save(self, path):
+        """Write the cube, wavelengths, history and attributes to HDF5, atomically."""
+        from .io import write_cube
+
+        write_cube(path, self.cube, self.wavelengths, self.history, self.attrs, full_field=self.full_field)
+
+
+class Solver:
+    """One calibration on one backend: the model, its Lipschitz constant and buffers, built once."""
+
+    def __init__(self, calibration, backend="numpy", device: str | None = None, settings: Settings | None = None):
+        self.settings = settings or Settings()
+        self.backend = get_backend(backend, self.settings.dtype, device) if isinstance(backend, str) else backend
+        self.calibration = calibration
+        self.model = ForwardModel(self.backend, calibration.psf, calibration.filters)
+        self.lipschitz = self.model.lipschitz()
+        self._b = None
+        self._r = self.backend.empty(self.model.sensor_shape)
+
+    def solve(self, measurement: np.ndarray, x0: np.ndarray | None = None,
+              progress: Callable[[dict], None] | None = None, snapshots=()) -> Result:
+        """Reconstruct one (H, W) measurement.
+
+        x0 is an optional (K, H, W) warm start in data units; ``snapshots`` lists iterations at
+        which a copy of the cube is kept in ``Result.snapshots`` (e.g. to measure accuracy on the way).
+        """
+        b = self._checked(measurement)
+        scale = float(np.max(np.abs(b)))
+        if scale == 0.0:
+            return self._result(self.model.embed(np.zeros(self._cube_window_shape())), 1.0, [], "zero measurement")
+        be, model = self.backend, self.model
+        self._b = be.to_device(b / scale)
+        regularizer = self._regularizer()
+        prox = Prox(be, regularizer, model.cube_shape)
+        start = model.embed(np.zeros(self._cube_window_shape()) if x0 is None else np.asarray(x0) / scale)
+        kept: dict[int, np.ndarray] = {}
+        log_objective = self._objective_logger(regularizer, scale, progress)
+
+        def on_iteration(record, x):
+            record["data"] *= scale ** 2
+            if record["iteration"] in snapshots:
+                kept[record["iteration"]] = (model.window(x) * scale).astype(np.float32)
+            log_objective(record, x)
+
+        result = fista(self._gradient_step, lambda z, out: prox(z, 1.0 / self.lipschitz, out), be, start,
+                       iters=self.settings.iters, tol=self.settings.tol, on_iteration=on_iteration)
+        out = self._result(result.x, scale, result.history, result.stop_reason, regularizer)
+        out.snapshots = kept
+        return out
+
+    # ---- pieces -------------------------------------------------------------------------
+    def _cube_window_shape(self):
+        return (self.model.n_bands,) + self.model.sensor_shape
+
+    def _checked(self, measurement) -> np.ndarray:
+        b = np.asarray(measurement, dtype=np.float64)
+        if b.shape != self.model.sensor_shape:
+            raise InputError(f"measurement {_shape(b.shape)} does not match calibration {_shape(self.model.sensor_shape)}")
+        bad = ~np.isfinite(b)
+        if bad.any():
+            y, x = np.argwhere(bad)[0]
+            raise InputError(f"measurement has {int(bad.sum())} non-finite values (first at row {y}, col {x})")
+        return b
+
+    def _regularizer(self) -> Regularizer:
+        """Absolute weights: τ₁, τ₃ times ‖Aᵀb‖_∞ and τ₂ times σ₁(Aᵀb), for the normalised b."""
+        s, be = self.settings, self.backend
+        atb = self.model.adjoint(self._b)
+        data_scale = be.amax(atb)
+        sigma1 = float(singular_values(be, atb).max()) if s.lowrank > 0 else 0.0
+        return Regularizer(tv=s.tv * data_scale, tv_weights=s.tv_weights, lowrank=s.lowrank * sigma1,
+                           l1=s.l1 * data_scale)
+
+    def _gradient_step(self, y, out) -> float:
+        """out = y − Aᵀ(Ay − b)/L; returns f(y) = ½‖Ay − b‖²."""
+        be = self.backend
+        self.model.forward(y, out=self._r)
+        be.axpy(-1.0, self._b, self._r, out=self._r)
+        data = 0.5 * be.vdot(self._r, self._r)
+        self.model.adjoint(self._r, out=out)
+        be.axpy(-1.0 / self.lipschitz, out, y, out=out)
+        return data
+
+    def _objective_logger(self, regularizer: Regularizer, scale: float, progress):
+        """Every ``objective_every`` iterations add F(x) = ½‖Ax − b‖² + g(x) (data units) to the record."""
+        every = self.settings.objective_every
+
+        def log(record: dict, x):
+            objective = math.nan
+            if record["iteration"] % every == 0 or record["iteration"] == 1:
+                be = self.backend
+                self.model.forward(x, out=self._r)
+                be.axpy(-1.0, self._b, self._r, out=self._r)
+                objective = (0.5 * be.vdot(self._r, self._r) + regularizer.value(be, x)) * scale ** 2
+            record["objective"] = objective
+            record["step"] = 1.0 / self.lipschitz
+            if progress is not None:
+                progress(record)
+
+        return log
+
+    def _result(self, x, scale, history, reason, regularizer: Regularizer | None = None) -> Result:
+        model = self.model
+        cube = (model.window(x) * scale).astype(np.float32)
+        full = (self.backend.to_host(x) * scale).astype(np.float32) if self.settings.full_field else None
+        attrs = {
+            **{k: v for k, v in asdict(self.settings).items()},
+            "backend": self.backend.name,
+            "device": self.backend.device_name,
+            "iterations": len(history),
+            "stop_reason": reason,
+            "lipschitz": self.lipschitz,
+            "data_scale": scale,
+            "field_shape": model.field_shape,
+            "window_offset": model.offset,
+            "active_priors": ",".join(regularizer.active_terms()) if regularizer else "",
+            "clsdcam_version": __version__,
+            "calibration": self.calibration.source,
+        }
+        return Result(cube=cube, wavelengths=np.asarray(self.calibration.wavelengths), history=history,
+                      attrs=attrs, full_field=full)
+
+
+def _shape(shape) -> str:
+    return "x".join(str(n) for n in shape)
+
+
+def reconstruct(measurement, calibration, backend="numpy", device: str | None = None, x0=None,
+                progress: Callable[[dict], None] | None = None, **settings) -> Result:
+    """Reconstruct a cube from one measurement; ``settings`` are the fields of ``Settings``."""
+    solver = Solver(calibration, backend=backend, device=device, settings=Settings(**settings))
+    return solver.solve(measurement, x0=x0, progress=progress)

@@ -1,0 +1,1 @@
+"""OpenCL C sources of clsdcam, installed as package data of ``clsdcam.kernels``."""

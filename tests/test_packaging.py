@@ -1,0 +1,37 @@
+"""The project's own set-up promises: README commands, CI script, kernels inside the wheel."""
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def readme_commands() -> list[str]:
+    """The shell lines of the README's first code block."""
+    text = (REPO / "README.md").read_text()
+    block = text.split("```bash\n", 1)[1].split("```", 1)[0]
+    return [line for line in block.splitlines() if line.strip()]
+
+
+def test_readme_opens_with_exactly_two_setup_commands():
+    commands = readme_commands()
+    assert len(commands) == 2
+    assert "clsdcam demo" in commands[0] and "pytest" in commands[1]
+    assert (REPO / "README.md").read_text().startswith("# clsdcam\n")
+
+
+def test_ci_runs_the_readme_test_command():
+    ci_lines = (REPO / ".ci" / "run").read_text().splitlines()
+    assert readme_commands()[1] in ci_lines
+
+
+def test_wheel_ships_every_kernel(tmp_path):
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp_path), str(REPO)],
+                   check=True, capture_output=True, timeout=600)
+    (wheel,) = tmp_path.glob("clsdcam-*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    sources = sorted(p.name for p in (REPO / "kernels").glob("*.cl"))
+    assert sources, "no kernels/*.cl in the source tree"
+    assert {f"clsdcam/kernels/{name}" for name in sources} <= names
+    assert "clsdcam/kernels/__init__.py" in names
