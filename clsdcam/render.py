@@ -1,0 +1,264 @@
+"""Pictures of a reconstructed cube: false colour, sum projections, spectra, convergence.
+
+A cube is a (K, H, W) array with band wavelengths (K,) in nm (any K ≥ 1, non-uniform or
+unsorted spacing, possibly outside the visible range). Colour matching comes from
+``colour-science`` (CIE 1931 2° observer). matplotlib and colour are imported inside the
+functions so that ``import clsdcam.render`` stays cheap; figures are drawn on an Agg canvas
+of their own (pyplot's global state and backend are left alone, so nothing leaks in batch
+runs) and every PNG is written through :func:`clsdcam.io.atomic_output`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .io import atomic_output
+
+OBSERVER = "CIE 1931 2 Degree Standard Observer"
+PERCENTILE = 99.5          # display white: this percentile of the brightest channel
+SINGLE_BAND_WIDTH = 10.0   # nm, nominal width of a lone band (only used for plotting)
+SPECTRUM_COLOURS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:brown")
+
+
+# ---- validation ------------------------------------------------------------------------
+def _check(cube, wavelengths, truth=None, points=None):
+    """(cube float32, wavelengths float64, truth or None, points or None), or InputError."""
+    cube = np.asarray(cube)
+    if cube.ndim != 3 or min(cube.shape) < 1 or cube.dtype.kind not in "biuf":
+        raise InputError(f"cube: expected a real (K, H, W) array with K, H, W ≥ 1, got shape {cube.shape} "
+                         f"dtype {cube.dtype}")
+    cube = cube.astype(np.float32, copy=False)
+    if not np.isfinite(cube).all():
+        raise InputError(f"cube: {int((~np.isfinite(cube)).sum())} non-finite values (NaN/Inf)")
+    wavelengths = np.asarray(wavelengths, dtype=np.float64).ravel()
+    if wavelengths.shape != (cube.shape[0],) or not np.isfinite(wavelengths).all():
+        raise InputError(f"wavelengths: expected {cube.shape[0]} finite values (one per band), "
+                         f"got {wavelengths.size}")
+    if truth is not None:
+        truth = np.asarray(truth)
+        if truth.shape != cube.shape:
+            raise InputError(f"truth: shape {truth.shape} differs from the cube's {cube.shape}")
+        truth = truth.astype(np.float32, copy=False)
+    if points is not None:
+        points = [_check_point(p, cube.shape[1:]) for p in points]
+    return cube, wavelengths, truth, points
+
+
+def _check_point(point, shape):
+    """(y, x) as ints inside an image of ``shape`` (H, W), or InputError."""
+    try:
+        y, x = (int(v) for v in point)
+    except (TypeError, ValueError):
+        raise InputError(f"points: {point!r} is not a (y, x) pair of integers") from None
+    if not (0 <= y < shape[0] and 0 <= x < shape[1]):
+        raise InputError(f"points: ({y}, {x}) lies outside the {shape[0]}×{shape[1]} image")
+    return y, x
+
+
+# ---- spectral helpers ------------------------------------------------------------------
+def band_edges(wavelengths) -> np.ndarray:
+    """Edges (K+1,) of bands around increasing centres λ_k: midpoints (λ_k + λ_{k+1})/2 inside,
+    the ends mirrored (λ_0 − (λ_1 − λ_0)/2, λ_{K−1} + (λ_{K−1} − λ_{K−2})/2); a lone band is
+    λ_0 ± SINGLE_BAND_WIDTH/2."""
+    centres = np.asarray(wavelengths, dtype=np.float64)
+    if centres.size == 1:
+        return centres[0] + np.array([-0.5, 0.5]) * SINGLE_BAND_WIDTH
+    mids = 0.5 * (centres[1:] + centres[:-1])
+    return np.concatenate([[2 * centres[0] - mids[0]], mids, [2 * centres[-1] - mids[-1]]])
+
+
+def band_widths(wavelengths) -> np.ndarray:
+    """Δλ_k (K,) in the input order: the width of band k between the edges of the sorted centres,
+    Δλ_k = (λ_{k+1} − λ_{k−1})/2 inside and the one-sided spacing at the ends."""
+    wavelengths = np.asarray(wavelengths, dtype=np.float64)
+    order = np.argsort(wavelengths, kind="stable")
+    widths = np.empty_like(wavelengths)
+    widths[order] = np.diff(band_edges(wavelengths[order]))
+    return widths
+
+
+def _rgb_weights(wavelengths):
+    """Per-band linear-sRGB weights (K, 3), or None when no colour is defined (K == 1 or no band
+    inside the CMF range).
+
+    w_k = (x̄, ȳ, z̄)(λ_k) · Δλ_k · A, with the CIE 1931 2° CMFs linearly interpolated at λ_k (zero
+    outside their tabulated range) and A the 3×3 matrix of ``colour.XYZ_to_sRGB`` (linear, no
+    encoding) with the equal-energy illuminant E as the source white, so that a spectrally flat
+    scene renders as neutral grey (the CAT02 adaptation E → D65 is part of A).
+    """
+    import colour
+
+    if wavelengths.size == 1:
+        return None
+    cmfs = colour.MSDS_CMFS[OBSERVER]
+    cmf = np.stack([np.interp(wavelengths, cmfs.wavelengths, cmfs.values[:, i], left=0.0, right=0.0)
+                    for i in range(3)], axis=1)
+    if not cmf.any():
+        return None
+    white_e = colour.CCS_ILLUMINANTS[OBSERVER]["E"]
+    xyz_to_rgb = colour.XYZ_to_sRGB(np.eye(3), illuminant=white_e, apply_cctf_encoding=False)  # rows: RGB of X, Y, Z
+    return (cmf * band_widths(wavelengths)[:, None]) @ xyz_to_rgb
+
+
+def _to_display(rgb):
+    """Linear (H, W, 3) → displayable sRGB in [0, 1]: clip negatives, divide by the PERCENTILE-th
+    percentile of max(R, G, B) (the maximum if that is 0), clip to 1, apply the sRGB encoding."""
+    import colour
+
+    rgb = np.clip(rgb, 0.0, None)
+    brightest = rgb.max(axis=-1)
+    scale = np.percentile(brightest, PERCENTILE)
+    scale = scale if scale > 0 else brightest.max()
+    if scale > 0:
+        rgb = np.clip(rgb / scale, 0.0, 1.0)
+    return np.asarray(colour.cctf_encoding(rgb, function="sRGB"), dtype=np.float64)
+
+
+def false_colour(cube, wavelengths) -> np.ndarray:
+    """(H, W, 3) sRGB image in [0, 1] of a (K, H, W) cube.
+
+    XYZ(y, x) = Σ_k cmf(λ_k) Δλ_k v_k(y, x) with the CIE 1931 2° colour matching functions, then
+    XYZ → linear sRGB (equal-energy white → D65), both folded into one (K, 3) weight matrix and
+    applied in one tensordot; then the display normalisation of :func:`_to_display`. When K == 1
+    or no band lies within the CMF range (e.g. all infrared) the image is the grey band sum
+    Σ_k v_k, normalised the same way.
+    """
+    cube, wavelengths, _, _ = _check(cube, wavelengths)
+    weights = _rgb_weights(wavelengths)
+    if weights is None:
+        rgb = np.repeat(cube.sum(axis=0, dtype=np.float64)[..., None], 3, axis=2)
+    else:
+        rgb = np.tensordot(cube, weights.astype(np.float32), axes=(0, 0))
+    return _to_display(rgb)
+
+
+def brightest_points(image, n: int = 4, min_distance: int | None = None) -> list[tuple[int, int]]:
+    """Up to ``n`` (y, x) maxima of a 2-D image, greedily: take the argmax, suppress every pixel
+    closer than ``min_distance`` (Euclidean; default max(1, H // 8)) and repeat."""
+    image = np.array(image, dtype=np.float64)
+    h, w = image.shape
+    min_distance = max(1, h // 8) if min_distance is None else min_distance
+    yy, xx = np.mgrid[:h, :w]
+    points = []
+    while len(points) < n and np.isfinite(image).any():
+        y, x = np.unravel_index(np.nanargmax(np.where(np.isfinite(image), image, np.nan)), image.shape)
+        points.append((int(y), int(x)))
+        image[(yy - y) ** 2 + (xx - x) ** 2 < min_distance ** 2] = -np.inf
+    return points
+
+
+# ---- figures ---------------------------------------------------------------------------
+def _figure(**kwargs):
+    """A matplotlib Figure on its own Agg canvas (no pyplot state, nothing to close)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(layout="constrained", **kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig, path: Path) -> Path:
+    """Write ``fig`` as PNG to ``path`` atomically and release its artists."""
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=100)
+    fig.clear()
+    return path
+
+
+def projections_figure(cube, wavelengths, image):
+    """False-colour ``image`` plus the sum projections P_xλ(λ, x) = Σ_y v(λ, y, x) and
+    P_yλ(y, λ) = Σ_x v(λ, y, x), drawn on band edges (nm) so non-uniform bands keep their widths.
+    Expects increasing wavelengths."""
+    k, h, w = cube.shape
+    edges = band_edges(wavelengths)
+    fig = _figure(figsize=(15, 4.8))
+    ax_img, ax_x, ax_y = fig.subplots(1, 3)
+    ax_img.imshow(image, interpolation="nearest")
+    ax_img.set(title="false colour (CIE 1931 → sRGB)", xlabel="x (px)", ylabel="y (px)")
+    mesh = ax_x.pcolormesh(np.arange(w + 1) - 0.5, edges, cube.sum(axis=1), shading="flat")
+    ax_x.set(title="x–λ projection (sum over y)", xlabel="x (px)", ylabel="wavelength (nm)")
+    fig.colorbar(mesh, ax=ax_x)
+    mesh = ax_y.pcolormesh(edges, np.arange(h + 1) - 0.5, cube.sum(axis=2).T, shading="flat")
+    ax_y.set(title="y–λ projection (sum over x)", xlabel="wavelength (nm)", ylabel="y (px)")
+    ax_y.invert_yaxis()
+    fig.colorbar(mesh, ax=ax_y)
+    return fig
+
+
+def spectra_figure(cube, wavelengths, image, points, truth=None):
+    """v(λ, y, x) against λ at each (y, x) in ``points`` (solid), the truth dashed in the same
+    colour, and the points marked on the false-colour ``image``."""
+    fig = _figure(figsize=(12, 4.8))
+    ax_img, ax_spec = fig.subplots(1, 2, width_ratios=(1, 1.6))
+    ax_img.imshow(image, interpolation="nearest")
+    ax_img.set(title="points", xlabel="x (px)", ylabel="y (px)")
+    for i, (y, x) in enumerate(points):
+        colour = SPECTRUM_COLOURS[i % len(SPECTRUM_COLOURS)]
+        ax_img.plot(x, y, "o", mfc="none", mec=colour, ms=10, mew=2)
+        ax_img.annotate(str(i + 1), (x, y), xytext=(6, 6), textcoords="offset points", color=colour)
+        ax_spec.plot(wavelengths, cube[:, y, x], ".-", color=colour, label=f"{i + 1}: (y={y}, x={x})")
+        if truth is not None:
+            ax_spec.plot(wavelengths, truth[:, y, x], "--", color=colour, label=f"{i + 1}: truth")
+    ax_spec.set(title="spectra", xlabel="wavelength (nm)", ylabel="intensity")
+    ax_spec.grid(alpha=0.3)
+    if points:
+        ax_spec.legend(fontsize="small", ncols=2 if truth is not None else 1)
+    return fig
+
+
+def convergence_figure(history):
+    """Objective and data term against iteration on a log axis; non-finite and non-positive
+    values (e.g. the objective on iterations where it was not evaluated) are left out."""
+    try:
+        iterations = np.array([r["iteration"] for r in history], dtype=np.float64)
+        series = {key: np.array([r.get(key, np.nan) for r in history], dtype=np.float64)
+                  for key in ("objective", "data")}
+    except (TypeError, KeyError, ValueError, AttributeError):
+        raise InputError("history: expected a list of dicts with numeric 'iteration', 'data' and 'objective'") from None
+    fig = _figure(figsize=(7, 4.5))
+    ax = fig.subplots()
+    plotted = False
+    for (key, values), style in zip(series.items(), ("o-", "-")):
+        keep = np.isfinite(values) & (values > 0)
+        if keep.any():
+            ax.plot(iterations[keep], values[keep], style, ms=3, label=key)
+            plotted = True
+    if plotted:
+        ax.set_yscale("log")
+        ax.legend()
+    seconds = history[-1].get("seconds", np.nan)
+    ax.set(title=f"convergence: {len(history)} iterations in {seconds:.3g} s", xlabel="iteration", ylabel="value")
+    ax.grid(alpha=0.3, which="both")
+    return fig
+
+
+def save_pictures(prefix, cube, wavelengths, history=None, points=None, truth=None) -> list[Path]:
+    """Write ``{prefix}_falsecolour.png``, ``_projections.png``, ``_spectra.png`` and, when
+    ``history`` is a non-empty list, ``_convergence.png``; return their paths.
+
+    ``points`` are (y, x) pixels for the spectra (default: up to 4 brightest pixels of the band sum,
+    at least H // 8 apart); ``truth`` is a cube of the same shape drawn dashed. Bands are sorted
+    by wavelength first. Bad shapes or points raise InputError before anything is written.
+    """
+    cube, wavelengths, truth, points = _check(cube, wavelengths, truth, points)
+    order = np.argsort(wavelengths, kind="stable")
+    cube, wavelengths = cube[order], wavelengths[order]
+    truth = None if truth is None else truth[order]
+    image = false_colour(cube, wavelengths)
+    points = brightest_points(cube.sum(axis=0)) if points is None else points
+    figures = {"projections": projections_figure(cube, wavelengths, image),
+               "spectra": spectra_figure(cube, wavelengths, image, points, truth)}
+    if history:
+        figures["convergence"] = convergence_figure(list(history))
+
+    import matplotlib.image
+
+    prefix = Path(prefix)
+    prefix.parent.mkdir(parents=True, exist_ok=True)
+    paths = [prefix.with_name(f"{prefix.name}_{name}.png") for name in ("falsecolour", *figures)]
+    with atomic_output(paths[0]) as tmp:
+        matplotlib.image.imsave(tmp, image, format="png")
+    return [paths[0], *(_save(fig, path) for fig, path in zip(figures.values(), paths[1:]))]
