@@ -59,7 +59,10 @@ def _add_solver_options(p: argparse.ArgumentParser):
     from .solver import DEFAULT_ITERS, DEFAULT_TOL, DEFAULT_TV
 
     p.add_argument("--backend", default="numpy", help="numpy (reference) or opencl")
-    p.add_argument("--device", default=None, help="OpenCL device: substring of platform or device name")
+    p.add_argument("--device", default=None,
+                   help="OpenCL device: substring of platform or device name (default: PYOPENCL_CTX, else a GPU, else a CPU)")
+    p.add_argument("--fft", default="auto", choices=("auto", "host", "reikna", "vkfft"),
+                   help="OpenCL FFT engine (default auto: host pocketfft on CPU devices, else vkfft if installed, else reikna)")
     p.add_argument("--iters", type=_positive_int, default=DEFAULT_ITERS, help=f"FISTA iterations (default {DEFAULT_ITERS})")
     p.add_argument("--tv", type=_number, default=DEFAULT_TV,
                    help=f"3-D TV weight, relative to ‖Aᵀb‖∞ (default {DEFAULT_TV})")
@@ -197,9 +200,9 @@ def _solve(args, calibration, measurement, truth=None, snapshots=()):
 
     settings = Settings(iters=args.iters, tv=args.tv, tv_weights=args.tv_weights, lowrank=args.lowrank,
                         tol=args.tol, dtype=args.dtype, full_field=args.full_field)
-    solver = Solver(calibration, backend=args.backend, device=args.device, settings=settings)
+    solver = Solver(calibration, backend=args.backend, device=args.device, settings=settings, fft=args.fft)
     if not args.quiet:
-        print(f"backend {solver.backend.name} on {solver.backend.device_name}; field "
+        print(f"backend {solver.backend.name} on {solver.backend.device_name} (FFT: {solver.backend.fft_engine}); field "
               f"{_describe(solver.model.cube_shape)}; L = {solver.lipschitz:.4g}", file=sys.stderr)
     with _progress_bar(args.iters, args.quiet) as progress:
         result = solver.solve(measurement, progress=progress, snapshots=snapshots)

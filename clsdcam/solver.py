@@ -20,7 +20,7 @@ from . import __version__
 from .backends import get_backend
 from .errors import InputError
 from .fista import fista
-from .model import ForwardModel
+from .model import ForwardModel, default_field_shape
 from .priors import Prox, Regularizer, singular_values
 
 DEFAULT_ITERS = 300
@@ -89,10 +89,12 @@ class Result:
 class Solver:
     """One calibration on one backend: the model, its Lipschitz constant and buffers, built once."""
 
-    def __init__(self, calibration, backend="numpy", device: str | None = None, settings: Settings | None = None):
+    def __init__(self, calibration, backend="numpy", device: str | None = None, settings: Settings | None = None,
+                 fft: str = "auto"):
         self.settings = settings or Settings()
-        self.backend = get_backend(backend, self.settings.dtype, device) if isinstance(backend, str) else backend
+        self.backend = get_backend(backend, self.settings.dtype, device, fft) if isinstance(backend, str) else backend
         self.calibration = calibration
+        self._check_memory()
         self.model = ForwardModel(self.backend, calibration.psf, calibration.filters)
         self.lipschitz = self.model.lipschitz()
         self._b = None
@@ -130,6 +132,13 @@ class Solver:
         return out
 
     # ---- pieces -------------------------------------------------------------------------
+    def _check_memory(self):
+        """Devices with their own memory say up front (InputError) when the problem cannot fit."""
+        check = getattr(self.backend, "check_problem", None)
+        if check is not None:
+            shape = self.calibration.psf.shape
+            check(shape, default_field_shape(shape), self.calibration.filters.shape[0])
+
     def _cube_window_shape(self):
         return (self.model.n_bands,) + self.model.sensor_shape
 
@@ -188,6 +197,7 @@ class Solver:
             **{k: v for k, v in asdict(self.settings).items()},
             "backend": self.backend.name,
             "device": self.backend.device_name,
+            "fft_engine": self.backend.fft_engine,
             "iterations": len(history),
             "stop_reason": reason,
             "lipschitz": self.lipschitz,
@@ -207,7 +217,7 @@ def _shape(shape) -> str:
 
 
 def reconstruct(measurement, calibration, backend="numpy", device: str | None = None, x0=None,
-                progress: Callable[[dict], None] | None = None, **settings) -> Result:
+                progress: Callable[[dict], None] | None = None, fft: str = "auto", **settings) -> Result:
     """Reconstruct a cube from one measurement; ``settings`` are the fields of ``Settings``."""
-    solver = Solver(calibration, backend=backend, device=device, settings=Settings(**settings))
+    solver = Solver(calibration, backend=backend, device=device, settings=Settings(**settings), fft=fft)
     return solver.solve(measurement, x0=x0, progress=progress)

@@ -86,3 +86,22 @@ def test_demo_prints_accuracy_and_time(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "PSNR" in printed and "s/iteration" in printed
     assert (tmp_path / "demo" / "cube.h5").exists() and (tmp_path / "demo" / "cube_falsecolour.png").exists()
+
+
+@pytest.mark.opencl
+def test_opencl_backend_reaches_the_numpy_psnr(simulated, tmp_path, capsys):
+    pytest.importorskip("pyopencl")
+    psnr = {}
+    for backend in ("numpy", "opencl"):
+        assert run_reconstruct(simulated, tmp_path / f"{backend}.h5", "--iters", "40", "--backend", backend,
+                               "--truth", str(simulated / "truth.h5")) == 0
+        psnr[backend] = float(capsys.readouterr().out.split("PSNR ")[1].split(" dB")[0])
+        with h5py.File(tmp_path / f"{backend}.h5", "r") as f:
+            assert f.attrs["backend"] == backend and f.attrs["fft_engine"]
+    assert abs(psnr["opencl"] - psnr["numpy"]) <= 0.05
+
+
+def test_devices_lists_the_opencl_devices(capsys):
+    pytest.importorskip("pyopencl")
+    assert main(["devices"]) == 0
+    assert "fp64" in capsys.readouterr().out

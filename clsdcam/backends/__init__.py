@@ -10,8 +10,9 @@ from ..errors import InputError
 BACKENDS = ("numpy", "opencl")
 
 
-def get_backend(name: str = "numpy", dtype="float32", device: str | None = None):
-    """A backend instance by name: ``numpy`` or ``opencl`` (``device`` picks an OpenCL device by substring)."""
+def get_backend(name: str = "numpy", dtype="float32", device: str | None = None, fft: str = "auto"):
+    """A backend instance by name: ``numpy`` or ``opencl`` (``device`` picks an OpenCL device by
+    substring, ``fft`` its FFT engine: auto, host, reikna or vkfft)."""
     if name == "numpy":
         from .numpy import NumpyBackend
 
@@ -19,5 +20,5 @@ def get_backend(name: str = "numpy", dtype="float32", device: str | None = None)
     if name == "opencl":
         from .opencl import OpenCLBackend
 
-        return OpenCLBackend(dtype, device=device)
+        return OpenCLBackend(dtype, device=device, fft=fft)
     raise InputError(f"--backend {name!r}: expected one of {', '.join(BACKENDS)}")

@@ -46,6 +46,7 @@ class NumpyBackend:
         self.cdtype = COMPLEX_OF[self.dtype]
         self.workers = workers or os.cpu_count() or 1
         self.device_name = "host CPU (NumPy/SciPy)"
+        self.fft_engine = "scipy pocketfft"
 
     # ---- memory -------------------------------------------------------------------------
     def to_device(self, host: np.ndarray, complex_: bool = False) -> np.ndarray:

@@ -1,0 +1,171 @@
+"""OpenCL devices: listing, choosing by name, one context and queue per device (cached).
+
+Every failure a user can meet here (no pyopencl, no driver, no matching device, no fp64,
+too little memory) is an :class:`~clsdcam.errors.InputError` with one line saying what
+to do, so the CLI prints it and exits with code 2.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..errors import InputError
+
+INSTALL_HINT = ("install an OpenCL driver, e.g. the portable CPU driver PoCL: "
+                "pip install 'clsdcam[pocl]' (PyPI pocl-binary-distribution)")
+
+_CONTEXTS: dict = {}   # device -> (context, queue)
+
+
+def import_pyopencl():
+    """The pyopencl module, or InputError saying how to get an OpenCL stack."""
+    try:
+        import pyopencl
+    except ImportError as exc:
+        raise InputError(f"the OpenCL backend needs pyopencl and a driver ({exc}); {INSTALL_HINT}") from exc
+    return pyopencl
+
+
+def _all_devices() -> list:
+    """Every (platform, device) pair, or InputError when there is no OpenCL platform."""
+    cl = import_pyopencl()
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error as exc:
+        raise InputError(f"no OpenCL platform found ({exc}); {INSTALL_HINT}") from exc
+    devices = [(p, d) for p in platforms for d in _platform_devices(cl, p)]
+    if not devices:
+        raise InputError(f"no OpenCL device found; {INSTALL_HINT}")
+    return devices
+
+
+def _platform_devices(cl, platform) -> list:
+    try:
+        return platform.get_devices()
+    except cl.Error:  # a platform with no devices raises DEVICE_NOT_FOUND
+        return []
+
+
+def has_fp64(device) -> bool:
+    return "cl_khr_fp64" in device.extensions or "cl_amd_fp64" in device.extensions
+
+
+def describe(device) -> str:
+    """'device name (platform name)', as recorded in output files."""
+    return f"{device.name.strip()} ({device.platform.name.strip()})"
+
+
+def list_devices() -> list[dict]:
+    """One dict per device: platform, device, type, global/max-alloc memory (MiB), compute units, fp64."""
+    cl = import_pyopencl()
+    return [{
+        "platform": p.name.strip(),
+        "device": d.name.strip(),
+        "type": cl.device_type.to_string(d.type),
+        "global_mem_mib": d.global_mem_size >> 20,
+        "max_alloc_mib": d.max_mem_alloc_size >> 20,
+        "compute_units": d.max_compute_units,
+        "fp64": has_fp64(d),
+    } for p, d in _all_devices()]
+
+
+def format_devices() -> str:
+    """A plain-text table of :func:`list_devices` (for ``clsdcam devices``)."""
+    rows = list_devices()
+    header = ("#", "platform", "device", "type", "memory MiB", "max alloc MiB", "CUs", "fp64")
+    table = [header] + [(str(i), r["platform"], r["device"], r["type"], str(r["global_mem_mib"]),
+                         str(r["max_alloc_mib"]), str(r["compute_units"]), "yes" if r["fp64"] else "no")
+                        for i, r in enumerate(rows)]
+    widths = [max(len(row[c]) for row in table) for c in range(len(header))]
+    return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in table)
+
+
+def choose_device(substring: str | None = None):
+    """The device to use.
+
+    With ``substring``: the first device whose platform or device name contains it
+    (case-insensitive), else InputError listing the devices. Without: the PYOPENCL_CTX
+    choice when that variable is set, else the first GPU, else the first CPU, else the first device.
+    """
+    devices = _all_devices()
+    if substring:
+        needle = substring.lower()
+        for platform, device in devices:
+            if needle in platform.name.lower() or needle in device.name.lower():
+                return device
+        names = "; ".join(describe(d) for _, d in devices)
+        raise InputError(f"--device {substring!r}: no OpenCL device matches; available: {names}")
+    if os.environ.get("PYOPENCL_CTX"):
+        return _pyopencl_ctx_device()
+    cl = import_pyopencl()
+    for wanted in (cl.device_type.GPU, cl.device_type.CPU):
+        for _, device in devices:
+            if device.type & wanted:
+                return device
+    return devices[0][1]
+
+
+def _pyopencl_ctx_device():
+    cl = import_pyopencl()
+    try:
+        context = cl.create_some_context(interactive=False)
+    except Exception as exc:  # noqa: BLE001 - pyopencl raises several types for a bad PYOPENCL_CTX
+        raise InputError(f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']!r}: {exc}") from exc
+    device = context.devices[0]
+    _CONTEXTS.setdefault(device, (context, cl.CommandQueue(context)))
+    return device
+
+
+def context_queue(device):
+    """The (context, in-order queue) of ``device``, created on first use and cached."""
+    if device not in _CONTEXTS:
+        cl = import_pyopencl()
+        context = cl.Context(devices=[device])
+        _CONTEXTS[device] = (context, cl.CommandQueue(context))
+    return _CONTEXTS[device]
+
+
+def require_dtype(device, dtype) -> None:
+    """InputError when float64 is asked of a device without cl_khr_fp64."""
+    if np.dtype(dtype) == np.float64 and not has_fp64(device):
+        raise InputError(f"--dtype float64: device {describe(device)} has no double precision "
+                         "(cl_khr_fp64); use --dtype float32 or another --device")
+
+
+# ---- memory --------------------------------------------------------------------------------
+
+FIELD_BUFFERS = 6      # FISTA x, x_prev, y, z; the model's field; the prox scratch
+
+
+def problem_bytes(sensor_shape, field_shape, n_bands: int, dtype="float32") -> tuple[int, int]:
+    """(total, largest single buffer) in bytes for one solve.
+
+    Field cubes K·Hp·Wp (FIELD_BUFFERS of them), the half spectrum K·Hp·(Wp/2+1) complex,
+    filters K·H·W, and the FFT work: up to two full complex field cubes (the packed
+    complex transform and its scratch).
+    """
+    item = np.dtype(dtype).itemsize
+    (h, w), (hp, wp) = sensor_shape, field_shape
+    field = n_bands * hp * wp * item
+    spectrum = n_bands * hp * (wp // 2 + 1) * 2 * item
+    fft_work = 2 * ((n_bands + 1) // 2) * hp * wp * 2 * item
+    total = FIELD_BUFFERS * field + spectrum + n_bands * h * w * item + fft_work + 8 * h * w * item
+    return total, max(field, spectrum, fft_work // 2)
+
+
+def estimate_bytes(sensor_shape, field_shape, n_bands: int, dtype="float32") -> int:
+    """Device memory one solve needs, in bytes (see :func:`problem_bytes`)."""
+    return problem_bytes(sensor_shape, field_shape, n_bands, dtype)[0]
+
+
+def check_memory(device, needed: int, largest: int = 0) -> None:
+    """InputError when ``needed`` bytes exceed the device's global memory, or ``largest`` its max allocation."""
+    mib = 1 << 20
+    advice = "use fewer bands, a smaller crop or field, or another --device (clsdcam devices lists them)"
+    if needed > device.global_mem_size:
+        raise InputError(f"the problem needs about {needed / mib:.0f} MiB of device memory but "
+                         f"{describe(device)} has {device.global_mem_size / mib:.0f} MiB; {advice}")
+    if largest > device.max_mem_alloc_size:
+        raise InputError(f"the problem needs a {largest / mib:.0f} MiB buffer but {describe(device)} "
+                         f"allows at most {device.max_mem_alloc_size / mib:.0f} MiB per buffer; {advice}")

@@ -1,0 +1,142 @@
+"""The OpenCL C sources of ``kernels/``: loaded once, built once per (context, dtype), launched simply.
+
+Every kernel is templated on the real type by ``-DREAL=float|double`` (``REAL2`` its complex
+pair); reductions accumulate in ``ACC`` = double when the device has fp64, else float with
+Kahan compensation. One program holds every family; it is built on first use and cached in a
+module-level dict keyed by (context, dtype, accumulator), so PoCL's slow compiles happen once.
+"""
+from __future__ import annotations
+
+import importlib.resources
+from pathlib import Path
+
+import numpy as np
+import pyopencl as cl
+
+from .cl_devices import has_fp64
+
+# Build order: common types first, then each family (reduce.cl before bandmix.cl, which uses acc_add).
+FAMILIES = ("common", "mask", "padcrop", "fft", "prox", "fista", "tv", "reduce", "bandmix")
+TYPES = {np.dtype(np.float32): ("float", "float2"), np.dtype(np.float64): ("double", "double2")}
+LOCAL_X = 64          # work-group width along the fastest axis of 2-D/3-D launches
+LOCAL_1D = 256        # work-group size of 1-D launches and reductions on GPUs (a power of two)
+LOCAL_CPU = 1024      # CPUs (PoCL): large groups amortise the per-group scheduling cost
+
+_SOURCE: str | None = None
+_PROGRAMS: dict = {}
+
+
+def kernel_dir() -> Path:
+    """``clsdcam.kernels`` when installed (package-dir mapping), else ``<repo>/kernels`` of a checkout."""
+    try:
+        packaged = importlib.resources.files("clsdcam.kernels")
+        if packaged.joinpath("common.cl").is_file():
+            return Path(str(packaged))
+    except (ModuleNotFoundError, TypeError):
+        pass
+    return Path(__file__).resolve().parents[2] / "kernels"
+
+
+def source() -> str:
+    """All kernel families concatenated in build order (read once)."""
+    global _SOURCE
+    if _SOURCE is None:
+        root = kernel_dir()
+        _SOURCE = "\n".join(f"/* ---- {name}.cl ---- */\n" + (root / f"{name}.cl").read_text(encoding="utf-8")
+                            for name in FAMILIES)
+    return _SOURCE
+
+
+def accumulator(device, kahan: bool | None = None) -> np.dtype:
+    """float64 when the device has fp64 (unless ``kahan`` forces compensated float32)."""
+    use_double = has_fp64(device) if kahan is None else not kahan
+    return np.dtype(np.float64 if use_double else np.float32)
+
+
+def program(context, dtype, acc) -> cl.Program:
+    """The built program for (context, dtype, accumulator), cached."""
+    key = (context, np.dtype(dtype), np.dtype(acc))
+    if key not in _PROGRAMS:
+        real, real2 = TYPES[np.dtype(dtype)]
+        options = [f"-DREAL={real}", f"-DREAL2={real2}", f"-DACC={TYPES[np.dtype(acc)][0]}"]
+        if any(has_fp64(d) for d in context.devices) and (np.dtype(acc) == np.float64 or real == "double"):
+            options.append("-DHAVE_FP64")
+        if np.dtype(acc) == np.float32:
+            options.append("-DKAHAN")
+        _PROGRAMS[key] = cl.Program(context, source()).build(options=options)
+    return _PROGRAMS[key]
+
+
+def round_up(n: int, multiple: int) -> int:
+    return -(-n // multiple) * multiple
+
+
+class Kernels:
+    """The kernels of one program on one queue, with the three launch shapes the families use.
+
+    Scalars are passed as typed NumPy scalars by the callers (np.int32 for sizes, np.int64 for
+    element counts, the real dtype for real scalars); arrays as pyopencl arrays (offset 0).
+    """
+
+    def __init__(self, queue, dtype, kahan: bool | None = None):
+        self.queue = queue
+        self.device = queue.device
+        self.dtype = np.dtype(dtype)
+        self.acc = accumulator(self.device, kahan)
+        self.program = program(queue.context, self.dtype, self.acc)
+        self._kernels: dict[str, cl.Kernel] = {}
+        self._partials: dict[int, tuple] = {}    # groups -> (host array, device buffer)
+        self.cpu = bool(self.device.type & cl.device_type.CPU)
+        self.max_group = min(LOCAL_CPU if self.cpu else LOCAL_1D, self.device.max_work_group_size)
+        self.local_1d = 1 << (self.max_group.bit_length() - 1)      # a power of two
+
+    def kernel(self, name: str) -> cl.Kernel:
+        if name not in self._kernels:
+            self._kernels[name] = cl.Kernel(self.program, name)
+        return self._kernels[name]
+
+    def launch(self, name: str, global_size, local_size, *args):
+        return self.kernel(name)(self.queue, global_size, local_size, *_args(args))
+
+    def grid3(self, name: str, shape, *args):
+        """Launch over (B, H, W): work item (x, y, b); x and y rounded up to the group (kernels bounds-check)."""
+        b, h, w = (int(s) for s in shape)
+        lx = min(LOCAL_X, round_up(w, 8), self.max_group)
+        ly = max(1, min(self.max_group // lx, _power_of_two_at_least(h)))
+        return self.launch(name, (round_up(w, lx), round_up(h, ly), b), (lx, ly, 1), *args)
+
+    def grid2(self, name: str, n: int, rows: int, *args):
+        """Launch over (rows, n): work item (i, row), i rounded up (kernels bounds-check)."""
+        lx = min(self.local_1d, round_up(n, 8))
+        return self.launch(name, (round_up(n, lx), int(rows)), (lx, 1), *args)
+
+    def grid1(self, name: str, n: int, *args):
+        """Launch over n elements, rounded up to the 1-D group size (kernels bounds-check)."""
+        return self.launch(name, (round_up(max(n, 1), self.local_1d),), (self.local_1d,), *args)
+
+    def reduce(self, name: str, n: int, *args) -> np.ndarray:
+        """Run a partial-sum kernel (reduce.cl) and return its per-group partials on the host (ACC dtype).
+
+        CPUs: one contiguous chunk of ⌈n/G⌉ terms per work item; GPUs: terms strided by G (coalesced).
+        """
+        local = self.local_1d
+        groups = max(1, min(-(-n // local), (2 if self.cpu else 8) * self.device.max_compute_units))
+        items = groups * local
+        span, step = (-(-n // items), 1) if self.cpu or items == 1 else (1, items)
+        if groups not in self._partials:
+            self._partials[groups] = (np.empty(groups, self.acc),
+                                      cl.Buffer(self.queue.context, cl.mem_flags.READ_WRITE, groups * self.acc.itemsize))
+        host, buffer = self._partials[groups]
+        scratch = cl.LocalMemory(local * self.acc.itemsize)
+        self.launch(name, (items,), (local,), buffer, scratch, np.int64(n), np.int64(span), np.int64(step), *args)
+        cl.enqueue_copy(self.queue, host, buffer)
+        return host.copy()
+
+
+def _power_of_two_at_least(n: int) -> int:
+    return 1 << max(0, int(n) - 1).bit_length()
+
+
+def _args(args) -> list:
+    """pyopencl arrays -> their buffers; everything else as given (typed scalars)."""
+    return [a.data if hasattr(a, "base_data") else a for a in args]

@@ -1,0 +1,75 @@
+/* Reductions to per-work-group partial sums, finished on the host in float64.
+ * Work item g accumulates the terms i = g·span + j·step (i < n; after span terms when step = 1) in ACC
+ * (double with fp64; float with Kahan compensation otherwise): span = 1, step = G (global size) on
+ * GPUs (coalesced), span = ⌈n/G⌉, step = 1 on CPUs (one contiguous chunk per item). The group then
+ * adds its items by a tree in local memory (local size a power of two); partial has one ACC per group. */
+
+/* Loop over the terms of this work item (see above); declares size_t i. */
+#define FOR_TERMS(i) \
+    for (size_t i = get_global_id(0) * (size_t)span, last_ = step == 1 ? min((size_t)n, i + (size_t)span) : (size_t)n; \
+         i < last_; i += step)
+
+/* s += v, compensated (c carries the lost low-order part) when -DKAHAN. */
+inline void acc_add(ACC *s, ACC *c, ACC v)
+{
+#ifdef KAHAN
+    ACC y = v - *c, t = *s + y;
+    *c = (t - *s) - y;
+    *s = t;
+#else
+    *s += v;
+#endif
+}
+
+/* Tree reduction of one value per work item; `op` 0 = sum, 1 = max. Returns the group total. */
+inline ACC group_reduce(ACC v, __local ACC *scratch, int op)
+{
+    int lid = get_local_id(0);
+    scratch[lid] = v;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int s = get_local_size(0) / 2; s > 0; s >>= 1) {
+        if (lid < s) scratch[lid] = op ? fmax(scratch[lid], scratch[lid + s]) : scratch[lid] + scratch[lid + s];
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    return scratch[0];
+}
+
+inline void store_partial(__global ACC *partial, ACC total)
+{
+    if (get_local_id(0) == 0) partial[get_group_id(0)] = total;
+}
+
+/* vdot: partial sums of Σ_i x_i·y_i (products formed in ACC). x, y: n elements. */
+__kernel void vdot(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
+                   __global const REAL *x, __global const REAL *y)
+{
+    ACC s = 0, c = 0;
+    FOR_TERMS(i) acc_add(&s, &c, (ACC)x[i] * (ACC)y[i]);
+    store_partial(partial, group_reduce(s - c, scratch, 0));
+}
+
+/* l1: partial sums of Σ_i |x_i|. x: n elements. */
+__kernel void l1(__global ACC *partial, __local ACC *scratch, long n, long span, long step, __global const REAL *x)
+{
+    ACC s = 0, c = 0;
+    FOR_TERMS(i) acc_add(&s, &c, (ACC)fabs(x[i]));
+    store_partial(partial, group_reduce(s - c, scratch, 0));
+}
+
+/* amax: partial maxima of |x_i| (exact in any precision). x: n elements. */
+__kernel void amax(__global ACC *partial, __local ACC *scratch, long n, long span, long step, __global const REAL *x)
+{
+    ACC m = 0;
+    FOR_TERMS(i) m = fmax(m, (ACC)fabs(x[i]));
+    store_partial(partial, group_reduce(m, scratch, 1));
+}
+
+/* tv_norm: partial sums of tv_term (tv.cl) over x (K,H,W), n = K·H·W. */
+__kernel void tv_norm(__global ACC *partial, __local ACC *scratch, long n, long span, long step, __global const REAL *x,
+                      int K, int H, int W, ACC w0, ACC w1, ACC w2)
+{
+    ACC s = 0, c = 0;
+    FOR_TERMS(i)
+        acc_add(&s, &c, tv_term(x, i, K, H, W, w0, w1, w2));
+    store_partial(partial, group_reduce(s - c, scratch, 0));
+}

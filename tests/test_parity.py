@@ -1,0 +1,242 @@
+"""OpenCL vs NumPy: every primitive, the forward model and a whole reconstruction.
+
+Runs on whatever OpenCL device the machine has (PoCL in CI, a GPU when one is lent) and on
+every FFT engine available there; skipped cleanly when there is no OpenCL platform.
+Tolerances, relative to max|reference|: elementwise 1e-6, FFT-based 2e-6 + 5e-7·log10(N),
+reductions 1e-5.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from clsdcam.backends.numpy import NumpyBackend
+from clsdcam.errors import InputError
+
+pytestmark = pytest.mark.opencl
+
+pytest.importorskip("pyopencl")
+from clsdcam.backends import cl_devices  # noqa: E402
+
+try:
+    DEVICE = cl_devices.choose_device()
+except InputError as exc:  # pragma: no cover - machines without any OpenCL driver
+    pytest.skip(f"no OpenCL device: {exc}", allow_module_level=True)
+
+from clsdcam.backends.fft import ReiknaFFT, available_engines  # noqa: E402
+from clsdcam.backends.opencl import OpenCLBackend  # noqa: E402
+
+DTYPES = ["float32"] + (["float64"] if cl_devices.has_fp64(DEVICE) else [])
+ENGINES = available_engines(DEVICE) + ["reikna-unpacked"]
+K, FIELD, SENSOR, OFFSET = 3, (22, 30), (11, 15), (5, 7)
+ELEMENTWISE, REDUCTION = 1e-6, 1e-5
+
+_BACKENDS: dict = {}
+
+
+def opencl(dtype="float32", engine="auto", kahan=None) -> OpenCLBackend:
+    """One backend per (dtype, engine, accumulator) for the whole session (PoCL compiles slowly)."""
+    key = (dtype, engine, kahan)
+    if key not in _BACKENDS:
+        base = "reikna" if engine == "reikna-unpacked" else engine
+        backend = OpenCLBackend(dtype, device=DEVICE, fft=base, kahan=kahan)
+        if engine == "reikna-unpacked":
+            backend.fft = ReiknaFFT(backend.kernels, pack=False)
+            backend.fft_engine = "reikna-unpacked"
+        _BACKENDS[key] = backend
+    return _BACKENDS[key]
+
+
+def fft_tolerance(n: int) -> float:
+    return 2e-6 + 5e-7 * math.log10(n)
+
+
+def relative_error(got, ref) -> float:
+    got, ref = np.asarray(got, dtype=np.complex128), np.asarray(ref, dtype=np.complex128)
+    assert got.shape == ref.shape
+    scale = np.max(np.abs(ref)) or 1.0
+    return float(np.max(np.abs(got - ref)) / scale)
+
+
+def inputs(dtype, seed=0) -> dict:
+    """Random host arrays of odd, non-square shapes."""
+    rng = np.random.default_rng(seed)
+    real = lambda *shape: rng.standard_normal(shape).astype(dtype)  # noqa: E731
+    cdtype = np.result_type(dtype, np.complex64)
+    cplx = lambda *shape: (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(cdtype)  # noqa: E731
+    half = (FIELD[0], FIELD[1] // 2 + 1)
+    return {"field": real(K, *FIELD), "field2": real(K, *FIELD), "window": real(K, *SENSOR),
+            "filters": rng.random((K, *SENSOR)).astype(dtype), "sensor": real(*SENSOR),
+            "spectrum": cplx(K, *half), "transfer": cplx(*half), "mix": rng.standard_normal((K, K))}
+
+
+def run(be, case, a):
+    """Apply one primitive (by case name) on backend ``be`` to host inputs ``a``; host result."""
+    d = lambda name: be.to_device(a[name])  # noqa: E731
+    cases = {
+        "pad": lambda: be.pad(d("window"), FIELD, OFFSET),
+        "pad_2d": lambda: be.pad(d("sensor"), FIELD, OFFSET),
+        "crop": lambda: be.crop(d("field"), SENSOR, OFFSET),
+        "mask_sum": lambda: be.mask_sum(d("filters"), d("field"), OFFSET),
+        "mask_spread": lambda: be.mask_spread(d("filters"), d("sensor"), FIELD, OFFSET),
+        "cmul": lambda: be.cmul(be.to_device(a["spectrum"], True), be.to_device(a["transfer"], True)),
+        "cmul_conj": lambda: be.cmul(be.to_device(a["spectrum"], True), be.to_device(a["transfer"], True), conj=True),
+        "cmul_inplace": lambda: _inplace_cmul(be, a),
+        "copy": lambda: be.copy(d("field")),
+        "scale": lambda: be.scale(-0.37, d("field")),
+        "axpy": lambda: be.axpy(-0.37, d("field"), d("field2")),
+        "axpy_alias_x": lambda: _alias(be, a, lambda x, y: be.axpy(0.8, x, y, out=x)),
+        "axpy_alias_y": lambda: _alias(be, a, lambda x, y: be.axpy(0.8, x, y, out=y)),
+        "extrapolate": lambda: be.extrapolate(d("field"), d("field2"), 0.61),
+        "extrapolate_alias": lambda: _alias(be, a, lambda x, y: be.extrapolate(x, y, 0.61, out=y)),
+        "nonneg": lambda: be.nonneg(d("field")),
+        "soft": lambda: be.soft(d("field"), 0.4),
+        "haar_tv": lambda: be.haar_tv(d("field"), 0.05, (1.0, 1.0, 1.0)),
+        "haar_tv_weighted": lambda: be.haar_tv(d("field"), 0.3, (0.0, 0.5, 2.0)),
+        "haar_tv_bands_only": lambda: be.haar_tv(d("field"), 0.1, (1.0, 0.0, 0.0)),
+        "haar_tv_none": lambda: be.haar_tv(d("field"), 0.1, (0.0, 0.0, 0.0)),
+        "haar_tv_alias": lambda: _alias(be, a, lambda x, y: be.haar_tv(x, 0.05, (1.0, 2.0, 0.5), out=x)),
+        "bandmix": lambda: be.bandmix(d("field"), a["mix"]),
+        "bandmix_alias": lambda: _alias(be, a, lambda x, y: be.bandmix(x, a["mix"], out=x)),
+        "vdot": lambda: be.vdot(d("field"), d("field2")),
+        "amax": lambda: be.amax(d("field")),
+        "l1_norm": lambda: be.l1_norm(d("field")),
+        "tv_norm": lambda: be.tv_norm(d("field"), (1.0, 0.5, 2.0)),
+        "tv_norm_xy": lambda: be.tv_norm(d("field"), (0.0, 1.0, 1.0)),
+        "gram": lambda: be.gram(d("field")),
+        "fft2": lambda: be.fft2(d("field")),
+        "ifft2": lambda: be.ifft2(be.to_device(a["spectrum"], True), FIELD),
+        "fft2_roundtrip": lambda: be.ifft2(be.fft2(d("field")), FIELD),
+    }
+    result = cases[case]()
+    return result if isinstance(result, (float, np.ndarray)) else be.to_host(result)
+
+
+def _alias(be, a, apply):
+    """Run ``apply(x, y)`` that writes into one of its inputs; return the written array."""
+    x, y = be.to_device(a["field"]), be.to_device(a["field2"])
+    return apply(x, y)
+
+
+def _inplace_cmul(be, a):
+    spectrum = be.to_device(a["spectrum"], True)
+    return be.cmul(spectrum, be.to_device(a["transfer"], True), out=spectrum)
+
+
+ELEMENTWISE_CASES = ["pad", "pad_2d", "crop", "mask_sum", "mask_spread", "cmul", "cmul_conj", "cmul_inplace",
+                     "copy", "scale", "axpy", "axpy_alias_x", "axpy_alias_y", "extrapolate", "extrapolate_alias",
+                     "nonneg", "soft", "haar_tv", "haar_tv_weighted", "haar_tv_bands_only", "haar_tv_none",
+                     "haar_tv_alias", "bandmix", "bandmix_alias"]
+REDUCTION_CASES = ["vdot", "amax", "l1_norm", "tv_norm", "tv_norm_xy", "gram"]
+FFT_CASES = ["fft2", "ifft2", "fft2_roundtrip"]
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("case", ELEMENTWISE_CASES)
+def test_elementwise(case, dtype):
+    a = inputs(dtype)
+    assert relative_error(run(opencl(dtype), case, a), run(NumpyBackend(dtype), case, a)) <= ELEMENTWISE
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("case", REDUCTION_CASES)
+def test_reduction(case, dtype):
+    a = inputs(dtype)
+    assert relative_error(run(opencl(dtype), case, a), run(NumpyBackend(dtype), case, a)) <= REDUCTION
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("case", FFT_CASES)
+def test_fft(case, dtype, engine):
+    a = inputs(dtype)
+    error = relative_error(run(opencl(dtype, engine), case, a), run(NumpyBackend(dtype), case, a))
+    assert error <= fft_tolerance(FIELD[0] * FIELD[1])
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("shape", [(2, 21, 31), (5, 16, 9), (1, 7, 6)])
+def test_fft_odd_shapes_and_band_counts(shape, engine):
+    """Odd sizes, odd band counts (one unpaired band when packing) and a single band."""
+    be, ref = opencl("float32", engine), NumpyBackend("float32")
+    x = np.random.default_rng(3).standard_normal(shape).astype(np.float32)
+    spectrum = be.fft2(be.to_device(x))
+    tolerance = fft_tolerance(shape[1] * shape[2])
+    assert relative_error(be.to_host(spectrum), ref.fft2(x)) <= tolerance
+    assert relative_error(be.to_host(be.ifft2(spectrum, shape[1:])), x) <= tolerance
+
+
+@pytest.mark.parametrize("kahan", [None, True])
+def test_reductions_over_ten_million_terms(kahan):
+    """vdot/l1/amax over 10⁷+1 float32 terms against float64 NumPy (also the Kahan float32 path)."""
+    be = opencl("float32", kahan=kahan)
+    x = np.random.default_rng(5).random(10_000_001).astype(np.float32) + np.float32(0.5)
+    x64 = x.astype(np.float64)
+    dx = be.to_device(x)
+    assert abs(be.vdot(dx, dx) - np.dot(x64, x64)) <= 1e-5 * np.dot(x64, x64)
+    assert abs(be.l1_norm(dx) - np.sum(x64)) <= 1e-5 * np.sum(x64)
+    assert be.amax(dx) == float(np.max(x))
+
+
+def test_float64_on_device_without_fp64_is_an_input_error(monkeypatch):
+    monkeypatch.setattr(cl_devices, "has_fp64", lambda device: False)
+    with pytest.raises(InputError, match="double precision"):
+        cl_devices.require_dtype(DEVICE, "float64")
+
+
+def test_memory_check_names_sizes_and_remedies():
+    be = opencl()
+    need = be.estimate_bytes((320, 448), (640, 896), 64)
+    assert need > 6 * 64 * 640 * 896 * 4
+    with pytest.raises(InputError, match="MiB.*fewer bands"):
+        be.check_memory(DEVICE.global_mem_size * 2)
+    with pytest.raises(InputError, match="per buffer"):
+        be.check_memory(1, largest=DEVICE.max_mem_alloc_size + 1)
+
+
+def test_unknown_device_lists_the_available_ones():
+    with pytest.raises(InputError, match="available"):
+        cl_devices.choose_device("no-such-device-xyz")
+    assert "fp64" in cl_devices.format_devices()
+
+
+# ---- the model and the solver --------------------------------------------------------------
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("field", [None, (25, 33)])
+def test_forward_model_and_adjoint(field, engine):
+    from clsdcam.model import ForwardModel
+
+    rng = np.random.default_rng(7)
+    psf, filters = rng.random(SENSOR), rng.random((K, *SENSOR))
+    ref = ForwardModel(NumpyBackend("float32"), psf, filters, field_shape=field)
+    model = ForwardModel(opencl("float32", engine), psf, filters, field_shape=field)
+    v = rng.standard_normal(ref.cube_shape).astype(np.float32)
+    r = rng.standard_normal(SENSOR).astype(np.float32)
+    n = ref.field_shape[0] * ref.field_shape[1]
+    forward = model.backend.to_host(model.forward(model.backend.to_device(v)))
+    adjoint = model.backend.to_host(model.adjoint(model.backend.to_device(r)))
+    assert relative_error(forward, ref.forward(v)) <= fft_tolerance(n)
+    assert relative_error(adjoint, ref.adjoint(r)) <= fft_tolerance(n)
+    assert model.lipschitz() == pytest.approx(ref.lipschitz(), rel=1e-5)
+
+
+@pytest.fixture(scope="module")
+def simulation():
+    from clsdcam.sim import simulate
+
+    return simulate(scene="leds", shape=(32, 48), n_bands=8, seed=0)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("priors", [{"tv": 3e-3}, {"tv": 3e-3, "lowrank": 0.02, "l1": 1e-3}])
+def test_reconstruction_matches_numpy(simulation, priors, engine):
+    """50 float32 FISTA iterations on a simulated scene: cubes agree to 1e-4 (relative L2)."""
+    from clsdcam import Settings, Solver
+
+    settings = Settings(iters=50, **priors)
+    ref = Solver(simulation.calibration, backend=NumpyBackend("float32"), settings=settings).solve(simulation.measurement)
+    got = Solver(simulation.calibration, backend=opencl("float32", engine), settings=settings).solve(simulation.measurement)
+    assert got.attrs["backend"] == "opencl" and got.iterations == 50
+    error = np.linalg.norm(got.cube - ref.cube) / np.linalg.norm(ref.cube)
+    assert error <= 1e-4

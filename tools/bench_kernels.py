@@ -1,0 +1,199 @@
+#!/usr/bin/env python3
+"""Benchmark every backend primitive and one whole FISTA iteration, OpenCL vs NumPy.
+
+    python tools/bench_kernels.py [--size 320x448] [--bands 64] [--repeat 5] [--engine auto]
+                                  [--dtype float32] [--device SUBSTRING] [--no-numpy] [--json PATH]
+
+The problem is the sensor H×W with the paper's 2H×2W field and K bands. Each row is the
+median of N timed runs after one warm-up, with queue.finish() before and after the timed
+part; "GB/s" is the minimum bytes read + written by the primitive divided by that time.
+"iteration" is one FISTA iteration through clsdcam.model/priors (forward, residual, adjoint,
+gradient step, TV prox + non-negativity, relative change, extrapolation).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import json
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from clsdcam.backends.numpy import NumpyBackend  # noqa: E402
+from clsdcam.model import ForwardModel  # noqa: E402
+from clsdcam.priors import Prox, Regularizer  # noqa: E402
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--size", default="320x448", help="sensor HxW (field 2H x 2W)")
+    parser.add_argument("--bands", type=int, default=64)
+    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--engine", default="auto", help="FFT engine: auto, host, reikna, vkfft")
+    parser.add_argument("--dtype", default="float32")
+    parser.add_argument("--device", default=None, help="OpenCL device name substring")
+    parser.add_argument("--no-numpy", action="store_true", help="time the OpenCL backend only")
+    parser.add_argument("--only", default=None, help="comma-separated row names to run")
+    parser.add_argument("--json", type=Path, default=None, help="also write the results here")
+    return parser.parse_args(argv)
+
+
+class Problem:
+    """Host data and per-backend device buffers for one geometry."""
+
+    def __init__(self, sensor, bands: int, dtype):
+        rng = np.random.default_rng(0)
+        self.sensor, self.bands = sensor, bands
+        self.field = (2 * sensor[0], 2 * sensor[1])
+        self.psf = rng.random(sensor)
+        self.filters = rng.random((bands, *sensor))
+        self.cube = rng.random((bands, *self.field)).astype(dtype)
+        self.item = np.dtype(dtype).itemsize
+
+    def sizes(self) -> dict:
+        """Bytes of one field cube, spectrum, filter stack and sensor image."""
+        k, (h, w), (hp, wp) = self.bands, self.sensor, self.field
+        return {"F": k * hp * wp * self.item, "S": k * hp * (wp // 2 + 1) * 2 * self.item,
+                "f": k * h * w * self.item, "s": h * w * self.item}
+
+
+def rows(be, p: Problem) -> dict:
+    """name -> (callable running the primitive once on ``be``, bytes moved)."""
+    n = p.sizes()
+    model = ForwardModel(be, p.psf, p.filters)
+    x, y, out = be.to_device(p.cube), be.to_device(p.cube[::-1].copy()), be.empty(model.cube_shape)
+    spectrum = be.fft2(x)
+    window = be.to_device(p.cube[:, :p.sensor[0], :p.sensor[1]])
+    b, r = be.empty(p.sensor), be.to_device(np.ones(p.sensor))
+    prox = Prox(be, Regularizer(tv=1e-3), model.cube_shape)
+    mix = np.eye(p.bands) * 0.5 + 0.5 / p.bands
+    offset = model.offset
+    state = iteration_state(be, model, p)
+    return {
+        "fft2": (lambda: be.fft2(x, out=spectrum), n["F"] + n["S"]),
+        "ifft2": (lambda: be.ifft2(spectrum, p.field, out=out), n["S"] + n["F"]),
+        "cmul": (lambda: be.cmul(spectrum, model.transfer, out=spectrum), 2 * n["S"]),
+        "pad": (lambda: be.pad(window, p.field, offset, out=out), n["f"] + n["F"]),
+        "crop": (lambda: be.crop(x, p.sensor, offset, out=window), 2 * n["f"]),
+        "mask_sum": (lambda: be.mask_sum(model.filters, x, offset, out=b), 2 * n["f"] + n["s"]),
+        "mask_spread": (lambda: be.mask_spread(model.filters, r, p.field, offset, out=out), n["f"] + n["s"] + n["F"]),
+        "scale": (lambda: be.scale(0.5, x, out=out), 2 * n["F"]),
+        "axpy": (lambda: be.axpy(-0.1, x, y, out=out), 3 * n["F"]),
+        "extrapolate": (lambda: be.extrapolate(x, y, 0.3, out=out), 3 * n["F"]),
+        "nonneg": (lambda: be.nonneg(x, out=out), 2 * n["F"]),
+        "soft": (lambda: be.soft(x, 0.1, out=out), 2 * n["F"]),
+        "haar_tv": (lambda: be.haar_tv(x, 1e-3, (1.0, 1.0, 1.0), out=out), 2 * n["F"]),
+        "vdot": (lambda: be.vdot(x, y), 2 * n["F"]),
+        "amax": (lambda: be.amax(x), n["F"]),
+        "l1_norm": (lambda: be.l1_norm(x), n["F"]),
+        "tv_norm": (lambda: be.tv_norm(x, (1.0, 1.0, 1.0)), n["F"]),
+        "gram": (lambda: be.gram(x), n["F"]),
+        "bandmix": (lambda: be.bandmix(x, mix, out=out), 2 * n["F"]),
+        "forward": (lambda: model.forward(x, out=b), 0),
+        "adjoint": (lambda: model.adjoint(r, out=out), 0),
+        "iteration": (lambda: one_iteration(be, model, prox, state), 0),
+    }
+
+
+def iteration_state(be, model, p: Problem) -> dict:
+    cube = p.cube * 0.01
+    return {"b": be.to_device(np.ones(p.sensor)), "r": be.empty(p.sensor), "x": be.to_device(cube),
+            "x_prev": be.to_device(cube), "y": be.to_device(cube), "z": be.empty(model.cube_shape), "L": 1e3}
+
+
+def one_iteration(be, model, prox, s):
+    """One FISTA iteration as fista.fista + Solver._gradient_step run it."""
+    model.forward(s["y"], out=s["r"])
+    be.axpy(-1.0, s["b"], s["r"], out=s["r"])
+    be.vdot(s["r"], s["r"])
+    model.adjoint(s["r"], out=s["z"])
+    be.axpy(-1.0 / s["L"], s["z"], s["y"], out=s["z"])
+    s["x"], s["x_prev"] = s["x_prev"], s["x"]
+    prox(s["z"], 1.0 / s["L"], s["x"])
+    be.axpy(-1.0, s["x_prev"], s["x"], out=s["z"])
+    be.vdot(s["x"], s["x"]), be.vdot(s["z"], s["z"])
+    be.extrapolate(s["x"], s["x_prev"], 0.5, out=s["y"])
+
+
+def median_seconds(run, finish, repeat: int) -> float:
+    """Median wall time of ``repeat`` runs after one warm-up, synchronised by ``finish``."""
+    run()
+    finish()
+    times = []
+    for _ in range(repeat):
+        finish()
+        start = time.perf_counter()
+        run()
+        finish()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def bench(be, p: Problem, repeat: int, only) -> dict:
+    finish = be.queue.finish if hasattr(be, "queue") else (lambda: None)
+    results = {}
+    for name, (run, nbytes) in rows(be, p).items():
+        if only and name not in only:
+            continue
+        seconds = median_seconds(run, finish, repeat)
+        results[name] = {"ms": seconds * 1e3, "GBps": nbytes / seconds / 1e9 if nbytes else None}
+        print(f"  {be.name:6s} {name:12s} {seconds * 1e3:9.2f} ms", file=sys.stderr, flush=True)
+    return results
+
+
+def environment(be) -> dict:
+    def version(package):
+        try:
+            return importlib.metadata.version(package)
+        except importlib.metadata.PackageNotFoundError:
+            return None
+
+    return {"device": be.device_name, "driver_version": be.device.driver_version, "opencl_version": be.device.version,
+            "fft_engine": be.fft_engine, "python": platform.python_version(),
+            **{p: version(p) for p in ("numpy", "scipy", "pyopencl", "reikna", "pocl-binary-distribution", "pyvkfft")}}
+
+
+def markdown(results: dict, meta: dict) -> str:
+    cl, ref = results["opencl"], results.get("numpy", {})
+    lines = [f"device: {meta['device']} (driver {meta['driver_version']}), FFT engine {meta['fft_engine']}; "
+             f"problem {meta['problem']}; median of {meta['repeat']}",
+             "", "| primitive | OpenCL ms | OpenCL GB/s | NumPy ms | NumPy GB/s | speed-up |", "|---|---:|---:|---:|---:|---:|"]
+    for name, row in cl.items():
+        other = ref.get(name)
+        cells = [name, f"{row['ms']:.2f}", _gb(row), f"{other['ms']:.2f}" if other else "—", _gb(other),
+                 f"{other['ms'] / row['ms']:.2f}×" if other else "—"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _gb(row) -> str:
+    return f"{row['GBps']:.1f}" if row and row["GBps"] else "—"
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    from clsdcam.backends.opencl import OpenCLBackend
+
+    sensor = tuple(int(v) for v in args.size.lower().split("x"))
+    problem = Problem(sensor, args.bands, np.dtype(args.dtype))
+    only = set(args.only.split(",")) if args.only else None
+    be = OpenCLBackend(args.dtype, device=args.device, fft=args.engine)
+    meta = {**environment(be), "problem": f"sensor {sensor[0]}x{sensor[1]}, field {problem.field[0]}x{problem.field[1]}, "
+                                         f"{args.bands} bands, {args.dtype}", "repeat": args.repeat}
+    results = {"opencl": bench(be, problem, args.repeat, only)}
+    if not args.no_numpy:
+        results["numpy"] = bench(NumpyBackend(args.dtype), problem, args.repeat, only)
+    print(markdown(results, meta))
+    if args.json:
+        args.json.write_text(json.dumps({"meta": meta, "results": results}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
