@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .io import as_real_array, atomic_output, existing_file, first_line, require_finite
+from .io import MAX_DATASET_BYTES, as_real_array, atomic_output, checked_read, existing_file, first_line, require_finite
 
 REFERENCE_CROP = (100, 420, 80, 540)  # rows 100:420, cols 80:540 of the 494×659 raw frame
 DEFECT_HALF = 2                        # the reference zeroes [i−2:i+2, j−2:j+2]
@@ -92,12 +92,13 @@ def _is_mat_v5(path: Path) -> bool:
 
 
 def _read_mat_v5(path: Path):
-    import scipy.io
+    """The numeric variables of a v5 file, through our bounds-checked reader (see ``matv5``)."""
+    from .matv5 import MatFormatError, read_mat_v5
 
     try:
-        contents = scipy.io.loadmat(path)
-    except Exception as exc:  # scipy raises ValueError/TypeError/OSError/MatReadError on bad files
-        raise InputError(f"calibration {path}: not a readable MATLAB file ({first_line(exc)})") from None
+        contents = read_mat_v5(path.read_bytes(), MAX_DATASET_BYTES)
+    except MatFormatError as exc:
+        raise InputError(f"calibration {path}: not a readable MATLAB v5 file ({exc})") from None
     return _paper_layout(path, contents)
 
 
@@ -111,7 +112,7 @@ def _read_hdf5_calibration(path: Path):
                 return tuple(_dataset(path, f, key) for key in ("psf", "filters", "wavelengths"))
             contents = {key: _dataset(path, f, key).T for key in ("psf", "mask", "wavs") if key in f}
             contents["__keys__"] = list(f.keys())
-    except (OSError, ValueError, TypeError) as exc:
+    except (OSError, ValueError, TypeError, KeyError, RuntimeError, MemoryError) as exc:
         raise InputError(f"calibration {path}: neither a MATLAB nor an HDF5 file ({first_line(exc)})") from None
     return _paper_layout(path, contents)
 
@@ -121,7 +122,7 @@ def _dataset(path, f, key):
 
     if key not in f or not isinstance(f[key], h5py.Dataset):
         raise InputError(f"calibration {path}: no dataset {key!r} (found: {', '.join(sorted(f.keys()))})")
-    return f[key][...]
+    return checked_read(f[key], f"calibration {path}")
 
 
 def _paper_layout(path, contents: dict):
@@ -148,6 +149,8 @@ class Preprocessing:
     normalize_filters: bool = True
     zero_defect: bool = False
     drop_last_band: bool = False
+    saturation: float | None = None          # exclude pixels with b ≥ saturation from the data term
+    dead_pixels: np.ndarray | None = None    # (H, W) bool, after cropping: pixels to exclude
 
     @classmethod
     def reference(cls) -> "Preprocessing":
@@ -187,6 +190,7 @@ def preprocess(calibration: Calibration, measurement: np.ndarray, options: Prepr
         filters, wavelengths = filters[:-1], wavelengths[:-1]
     if options.zero_defect:
         filters, b = zero_defect_block(filters, b)
+    filters, b = exclude_pixels(filters, b, excluded_pixels(b, options))
     if options.normalize_psf:
         psf = psf / np.linalg.norm(psf)
     if options.normalize_filters:
@@ -215,6 +219,29 @@ def zero_defect_block(filters: np.ndarray, b: np.ndarray):
     filters[(slice(None),) + block] = 0
     b[block] = 0
     return filters, b
+
+
+def excluded_pixels(b: np.ndarray, options: Preprocessing) -> np.ndarray:
+    """(H, W) bool: saturated (b ≥ ``saturation``) or listed dead pixels."""
+    excluded = np.zeros(b.shape, bool)
+    if options.saturation is not None:
+        excluded |= b >= options.saturation
+    if options.dead_pixels is not None:
+        if options.dead_pixels.shape != b.shape:
+            raise InputError(f"dead-pixel mask {_shape(options.dead_pixels.shape)} does not match the "
+                             f"measurement {_shape(b.shape)} (after cropping)")
+        excluded |= options.dead_pixels
+    return excluded
+
+
+def exclude_pixels(filters: np.ndarray, b: np.ndarray, excluded: np.ndarray):
+    """Remove pixels from the data term: F_k = 0 and b = 0 there, so row (y, x) of A and of b vanish
+    and ½‖b − Av‖² no longer sees them (their scene content is still inferred from the rest)."""
+    if not excluded.any():
+        return filters, b
+    if excluded.all():
+        raise InputError("every pixel is excluded (saturated or dead): nothing left to reconstruct from")
+    return np.where(excluded, 0.0, filters), np.where(excluded, 0.0, b)
 
 
 def _shape(shape) -> str:

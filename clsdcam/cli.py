@@ -74,6 +74,8 @@ def _add_solver_options(p: argparse.ArgumentParser):
     p.add_argument("--png", default=None, metavar="PREFIX", help="write pictures PREFIX_*.png")
     p.add_argument("--full-field", action="store_true", help="also write the whole padded field")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--save-on-interrupt", action="store_true",
+                   help="on Ctrl-C, write the best cube so far (default: write nothing)")
 
 
 def _add_preprocessing_options(p: argparse.ArgumentParser):
@@ -84,6 +86,10 @@ def _add_preprocessing_options(p: argparse.ArgumentParser):
     p.add_argument("--drop-last-band", action="store_true", help="drop the calibration's last band")
     p.add_argument("--no-normalize-psf", action="store_true", help="keep the PSF as given (default: unit L2 norm)")
     p.add_argument("--no-normalize-filters", action="store_true", help="keep the filters as given (default: max 1)")
+    p.add_argument("--saturation", type=_number, default=None, metavar="LEVEL",
+                   help="exclude pixels whose raw value is ≥ LEVEL (saturated) from the data term")
+    p.add_argument("--dead-pixels", default=None, metavar="FILE",
+                   help="image/.npy mask (non-zero = dead, same size as the measurement) of pixels to exclude")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -129,12 +135,15 @@ def cmd_reconstruct(args) -> int:
     calibration = Calibration.load(args.calibration)
     measurement = load_measurement(args.measurement)
     calibration, measurement = preprocess(calibration, measurement, _preprocessing(args))
+    truth = _read_truth(args.truth) if args.truth else None
+    expected = (calibration.n_bands,) + measurement.shape
+    if truth is not None and truth.shape != expected:
+        raise InputError(f"--truth {args.truth}: cube {_describe(truth.shape)} does not match {_describe(expected)}")
     result = _solve(args, calibration, measurement)
-    result.save(args.output)
-    _report(args, result, Path(args.output))
-    if args.truth:
-        _print_accuracy(result.cube, _read_truth(args.truth))
-    return 0
+    code = _write(args, result, truth)
+    if truth is not None and code == 0:
+        _print_accuracy(result.cube, truth)
+    return code
 
 
 def cmd_simulate(args) -> int:
@@ -156,9 +165,10 @@ def cmd_demo(args) -> int:
     print(f"simulated scene {sim.scene!r}, {_describe(sim.truth.shape)}, in {time.perf_counter() - start:.1f} s")
     args.output = str(Path(args.outdir) / "cube.h5")
     args.png = args.png or str(Path(args.outdir) / "cube")
-    result = _solve(args, sim.calibration, sim.measurement, truth=sim.truth, snapshots=args.report_at)
-    result.save(args.output)
-    _report(args, result, Path(args.output))
+    result = _solve(args, sim.calibration, sim.measurement, snapshots=args.report_at)
+    code = _write(args, result, sim.truth)
+    if code:
+        return code
     for iteration, cube in sorted(result.snapshots.items()):
         _print_accuracy(cube, sim.truth, f"after {iteration} iterations ({result.history[iteration - 1]['seconds']:.1f} s): ")
     _print_accuracy(result.cube, sim.truth, f"final ({result.iterations} iterations): ")
@@ -186,16 +196,30 @@ def _preprocessing(args):
     from .calibration import Preprocessing, parse_crop
 
     base = Preprocessing.reference() if args.reference_preprocess else Preprocessing()
+    crop = parse_crop(args.crop) if args.crop else base.crop
     return Preprocessing(
-        crop=parse_crop(args.crop) if args.crop else base.crop,
+        crop=crop,
         normalize_psf=not args.no_normalize_psf,
         normalize_filters=not args.no_normalize_filters,
         zero_defect=args.zero_defect or base.zero_defect,
         drop_last_band=args.drop_last_band or base.drop_last_band,
+        saturation=args.saturation,
+        dead_pixels=_dead_pixels(args.dead_pixels, crop),
     )
 
 
-def _solve(args, calibration, measurement, truth=None, snapshots=()):
+def _dead_pixels(path, crop):
+    """The --dead-pixels mask as (H, W) bool, cropped like the measurement."""
+    if path is None:
+        return None
+    from .io import load_measurement
+
+    mask = load_measurement(path) != 0
+    return mask if crop is None else mask[crop[0]:crop[1], crop[2]:crop[3]]
+
+
+def _solve(args, calibration, measurement, snapshots=()):
+    """Build the solver and run it with a progress bar; Ctrl-C without --save-on-interrupt propagates."""
     from .solver import Settings, Solver
 
     settings = Settings(iters=args.iters, tv=args.tv, tv_weights=args.tv_weights, lowrank=args.lowrank,
@@ -206,12 +230,26 @@ def _solve(args, calibration, measurement, truth=None, snapshots=()):
               f"{_describe(solver.model.cube_shape)}; L = {solver.lipschitz:.4g}", file=sys.stderr)
     with _progress_bar(args.iters, args.quiet) as progress:
         result = solver.solve(measurement, progress=progress, snapshots=snapshots)
-    if args.png:
+    if result.stop_reason == "interrupted" and not args.save_on_interrupt:
+        raise KeyboardInterrupt
+    return result
+
+
+def _write(args, result, truth=None) -> int:
+    """Save the cube (and pictures unless interrupted); 130 after an interrupted run, else 0."""
+    result.save(args.output)
+    interrupted = result.stop_reason == "interrupted"
+    if args.png and not interrupted:
         from .render import save_pictures
 
         paths = save_pictures(args.png, result.cube, result.wavelengths, history=result.history, truth=truth)
         print("pictures: " + ", ".join(str(p) for p in paths))
-    return result
+    _report(args, result, Path(args.output))
+    if interrupted:
+        print(f"clsdcam: interrupted after {result.iterations} iterations; wrote the best cube so far to "
+              f"{args.output}", file=sys.stderr)
+        return 130
+    return 0
 
 
 class _progress_bar:

@@ -16,6 +16,7 @@ import numpy as np
 from .errors import InputError
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff")
+MAX_DATASET_BYTES = 8 << 30   # refuse to read more than 8 GiB from one dataset (a corrupt or hostile header)
 
 
 # ---- atomic writes ----------------------------------------------------------------------
@@ -65,7 +66,8 @@ def as_real_array(data, name: str) -> np.ndarray:
     array = np.asarray(data)
     if array.dtype.kind not in "biuf":
         raise InputError(f"{name}: expected real numbers, found dtype {array.dtype}")
-    return array.astype(np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):  # out-of-range values become inf, then rejected as non-finite
+        return array.astype(np.float64)
 
 
 def read_h5_dataset(path: Path, key: str, what: str) -> np.ndarray:
@@ -76,9 +78,18 @@ def read_h5_dataset(path: Path, key: str, what: str) -> np.ndarray:
         with h5py.File(path, "r") as f:
             if key not in f or not isinstance(f[key], h5py.Dataset):
                 raise InputError(f"{what} {path}: no dataset {key!r} (found: {', '.join(sorted(f.keys())) or 'none'})")
-            return f[key][...]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+            return checked_read(f[key], f"{what} {path}")
+    except (OSError, ValueError, KeyError, TypeError, RuntimeError, MemoryError) as exc:
         raise InputError(f"{what} {path}: not a readable HDF5 file ({first_line(exc)})") from None
+
+
+def checked_read(dataset, name: str) -> np.ndarray:
+    """Read an HDF5 dataset after checking that its declared size is sane."""
+    nbytes = dataset.size * dataset.dtype.itemsize
+    if nbytes > MAX_DATASET_BYTES:
+        raise InputError(f"{name}: dataset {dataset.name} declares {nbytes / 2**30:.1f} GiB, more than the "
+                         f"{MAX_DATASET_BYTES >> 30} GiB limit (corrupt file?)")
+    return dataset[...]
 
 
 def first_line(exc: BaseException) -> str:
@@ -126,9 +137,10 @@ def _read_image(path: Path) -> np.ndarray:
 
 
 def _read_npy(path: Path) -> np.ndarray:
+    """Memory-map first, so a header that declares more data than the file holds fails cheaply."""
     try:
-        return np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
+        return np.array(np.load(path, mmap_mode="r", allow_pickle=False))
+    except Exception as exc:  # numpy's header parser raises ValueError, SyntaxError, TokenError, EOFError, …
         raise InputError(f"measurement {path}: not a readable .npy array ({first_line(exc)})") from None
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from . import __version__
 from .backends import get_backend
 from .errors import InputError
+from .io import require_finite
 from .fista import fista
 from .model import ForwardModel, default_field_shape
 from .priors import Prox, Regularizer, singular_values
@@ -39,12 +40,15 @@ class Settings:
     l1: float = 0.0
     tol: float = DEFAULT_TOL
     dtype: str = "float32"
-    objective_every: int = 10
+    objective_every: int = 10      # F(x) evaluated (and the best iterate kept) this often
+    restart: bool = True           # adaptive momentum restart (O'Donoghue–Candès)
+    step_scale: float = 1.0        # step = step_scale / L; > 1 only to test the back-off
     full_field: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "tv_weights", tuple(float(w) for w in self.tv_weights))
         _require(isinstance(self.iters, (int, np.integer)) and self.iters >= 1, f"--iters {self.iters}: must be an integer ≥ 1")
+        _require(_finite_nonneg(self.step_scale) and self.step_scale > 0, f"step_scale {self.step_scale}: must be > 0")
         for name in ("tv", "lowrank", "l1", "tol"):
             value = getattr(self, name)
             _require(_finite_nonneg(value), f"--{name} {value}: must be a finite number ≥ 0")
@@ -117,17 +121,21 @@ class Solver:
         prox = Prox(be, regularizer, model.cube_shape)
         start = model.embed(np.zeros(self._cube_window_shape()) if x0 is None else np.asarray(x0) / scale)
         kept: dict[int, np.ndarray] = {}
-        log_objective = self._objective_logger(regularizer, scale, progress)
 
         def on_iteration(record, x):
-            record["data"] *= scale ** 2
+            for key in ("data", "objective"):
+                record[key] *= scale ** 2
             if record["iteration"] in snapshots:
                 kept[record["iteration"]] = (model.window(x) * scale).astype(np.float32)
-            log_objective(record, x)
+            if progress is not None:
+                progress(record)
 
-        result = fista(self._gradient_step, lambda z, out: prox(z, 1.0 / self.lipschitz, out), be, start,
-                       iters=self.settings.iters, tol=self.settings.tol, on_iteration=on_iteration)
-        out = self._result(result.x, scale, result.history, result.stop_reason, regularizer)
+        result = fista(self._gradient_step, lambda z, out, step: prox(z, step, out), be, start,
+                       step=self.settings.step_scale / self.lipschitz, iters=self.settings.iters,
+                       tol=self.settings.tol, objective=lambda x: self._objective(regularizer, x),
+                       objective_every=self.settings.objective_every, restart=self.settings.restart,
+                       on_iteration=on_iteration)
+        out = self._result(result.x, scale, result.history, result.stop_reason, regularizer, result.step)
         out.snapshots = kept
         return out
 
@@ -146,11 +154,7 @@ class Solver:
         b = np.asarray(measurement, dtype=np.float64)
         if b.shape != self.model.sensor_shape:
             raise InputError(f"measurement {_shape(b.shape)} does not match calibration {_shape(self.model.sensor_shape)}")
-        bad = ~np.isfinite(b)
-        if bad.any():
-            y, x = np.argwhere(bad)[0]
-            raise InputError(f"measurement has {int(bad.sum())} non-finite values (first at row {y}, col {x})")
-        return b
+        return require_finite(b, "measurement")
 
     def _regularizer(self) -> Regularizer:
         """Absolute weights: τ₁, τ₃ times ‖Aᵀb‖_∞ and τ₂ times σ₁(Aᵀb), for the normalised b."""
@@ -161,35 +165,26 @@ class Solver:
         return Regularizer(tv=s.tv * data_scale, tv_weights=s.tv_weights, lowrank=s.lowrank * sigma1,
                            l1=s.l1 * data_scale)
 
-    def _gradient_step(self, y, out) -> float:
-        """out = y − Aᵀ(Ay − b)/L; returns f(y) = ½‖Ay − b‖²."""
+    def _gradient_step(self, y, out, step: float) -> float:
+        """out = y − step·Aᵀ(Ay − b); returns f(y) = ½‖Ay − b‖²."""
         be = self.backend
-        self.model.forward(y, out=self._r)
-        be.axpy(-1.0, self._b, self._r, out=self._r)
+        self._residual(y)
         data = 0.5 * be.vdot(self._r, self._r)
         self.model.adjoint(self._r, out=out)
-        be.axpy(-1.0 / self.lipschitz, out, y, out=out)
+        be.axpy(-step, out, y, out=out)
         return data
 
-    def _objective_logger(self, regularizer: Regularizer, scale: float, progress):
-        """Every ``objective_every`` iterations add F(x) = ½‖Ax − b‖² + g(x) (data units) to the record."""
-        every = self.settings.objective_every
+    def _residual(self, x):
+        """r = Ax − b (in the solver's buffer)."""
+        self.model.forward(x, out=self._r)
+        return self.backend.axpy(-1.0, self._b, self._r, out=self._r)
 
-        def log(record: dict, x):
-            objective = math.nan
-            if record["iteration"] % every == 0 or record["iteration"] == 1:
-                be = self.backend
-                self.model.forward(x, out=self._r)
-                be.axpy(-1.0, self._b, self._r, out=self._r)
-                objective = (0.5 * be.vdot(self._r, self._r) + regularizer.value(be, x)) * scale ** 2
-            record["objective"] = objective
-            record["step"] = 1.0 / self.lipschitz
-            if progress is not None:
-                progress(record)
+    def _objective(self, regularizer: Regularizer, x) -> float:
+        """F(x) = ½‖Ax − b‖² + g(x) for the normalised b."""
+        self._residual(x)
+        return 0.5 * self.backend.vdot(self._r, self._r) + regularizer.value(self.backend, x)
 
-        return log
-
-    def _result(self, x, scale, history, reason, regularizer: Regularizer | None = None) -> Result:
+    def _result(self, x, scale, history, reason, regularizer: Regularizer | None = None, step: float = 0.0) -> Result:
         model = self.model
         cube = (model.window(x) * scale).astype(np.float32)
         full = (self.backend.to_host(x) * scale).astype(np.float32) if self.settings.full_field else None
@@ -201,6 +196,8 @@ class Solver:
             "iterations": len(history),
             "stop_reason": reason,
             "lipschitz": self.lipschitz,
+            "final_step": step,
+            **{f"{key}s": sum(bool(r[key]) for r in history) for key in ("restart", "rollback", "backoff")},
             "data_scale": scale,
             "field_shape": model.field_shape,
             "window_offset": model.offset,

@@ -62,7 +62,7 @@ def test_single_band_mask_without_trailing_axis(tmp_path):
     ({"psf": PSF, "mask": MASK, "wavs": WAVS[:, :-1]}, "3 wavelengths for 4 bands"),
     ({"psf": 0 * PSF, "mask": MASK, "wavs": WAVS}, "psf is all zeros"),
     ({"psf": np.where(PSF > 0.9, np.nan, PSF), "mask": MASK, "wavs": WAVS}, "non-finite"),
-    ({"psf": PSF, "mask": MASK, "wavs": np.array([["a", "b", "c", "d"]])}, "expected real numbers"),
+    ({"psf": PSF, "mask": MASK, "wavs": np.array([["a", "b", "c", "d"]])}, "missing wavs"),
 ])
 def test_bad_calibrations_name_the_problem(tmp_path, contents, message):
     scipy.io.savemat(tmp_path / "bad.mat", contents)
@@ -129,3 +129,19 @@ def test_real_thordog_frame_with_reference_crop(shared_data):
     cal = Calibration(np.ones((494, 659)), np.ones((3, 494, 659)), [450.0, 550.0, 650.0])
     out, b = preprocess(cal, frame, Preprocessing.reference())
     assert b.shape == (320, 460) and out.filters.shape == (2, 320, 460)
+
+
+@pytest.mark.parametrize("compress", [False, True])
+def test_matlab_v5_reader_matches_scipy_on_mixed_content(tmp_path, compress):
+    """Our bounds-checked v5 reader against scipy's on numeric classes, a string and a cell to skip."""
+    from clsdcam.io import MAX_DATASET_BYTES
+    from clsdcam.matv5 import read_mat_v5
+
+    contents = {"psf": PSF, "mask": MASK.astype(np.float32), "wavs": WAVS.astype(np.uint16),
+                "ints": np.arange(-3, 9, dtype=np.int8).reshape(3, 4), "note": "text", "cell": np.array([1, "a"], dtype=object)}
+    scipy.io.savemat(tmp_path / "m.mat", contents, do_compression=compress)
+    ours = read_mat_v5((tmp_path / "m.mat").read_bytes(), MAX_DATASET_BYTES)
+    reference = scipy.io.loadmat(tmp_path / "m.mat")
+    assert sorted(ours) == ["ints", "mask", "psf", "wavs"]
+    for key, value in ours.items():
+        np.testing.assert_array_equal(value, reference[key].astype(np.float64))

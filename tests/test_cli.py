@@ -58,12 +58,17 @@ def bad_cases(simulated, tmp_path):
         "non-numeric tv": [meas, "--calibration", cal, "--tv", "abc"],
         "unknown backend": [meas, "--calibration", cal, "--backend", "cuda"],
         "bad tv weights": [meas, "--calibration", cal, "--tv-weights", "1,2"],
+        "unknown device": [meas, "--calibration", cal, "--backend", "opencl", "--device", "no-such-device"],
+        "unknown fft engine": [meas, "--calibration", cal, "--fft", "fftw"],
+        "negative lowrank": [meas, "--calibration", cal, "--lowrank", "-0.1"],
+        "truth of the wrong shape": [meas, "--calibration", cal, "--truth", cal],
     }
 
 
 @pytest.mark.parametrize("case", ["missing calibration", "missing measurement", "nan measurement", "wrong shape",
                                   "negative tv", "zero iterations", "non-numeric tv", "unknown backend",
-                                  "bad tv weights"])
+                                  "bad tv weights", "unknown device", "unknown fft engine", "negative lowrank",
+                                  "truth of the wrong shape"])
 def test_bad_input_exits_2_with_one_line_and_no_output(simulated, tmp_path, capsys, case):
     output = tmp_path / "out.h5"
     args = bad_cases(simulated, tmp_path)[case]

@@ -41,3 +41,17 @@ def test_scaling_the_measurement_scales_the_cube():
     base = reconstruct(sim.measurement, sim.calibration, iters=20, dtype="float64").cube
     scaled = reconstruct(sim.measurement * 1e4, sim.calibration, iters=20, dtype="float64").cube
     np.testing.assert_allclose(scaled, base * 1e4, rtol=1e-5, atol=1e-6 * scaled.max())
+
+
+def test_excluding_saturated_pixels_recovers_a_clipped_measurement():
+    from clsdcam.calibration import Preprocessing, preprocess
+
+    sim = simulate(scene="target", shape=(48, 64), n_bands=8, seed=4)
+    level = 0.3 * sim.measurement.max()  # ~6 % of the pixels saturate
+    clipped = np.minimum(sim.measurement, level)
+    plain = reconstruct(clipped, sim.calibration, iters=150).cube
+    cal, b = preprocess(sim.calibration, clipped, Preprocessing(saturation=level, normalize_psf=False,
+                                                                normalize_filters=False))
+    masked = reconstruct(b, cal, iters=150).cube
+    assert (clipped >= level).sum() > 5
+    assert psnr(masked, sim.truth) > psnr(plain, sim.truth) + 2.0  # measured: 13.6 dB → 17.0 dB

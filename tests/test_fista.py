@@ -1,10 +1,13 @@
-"""The FISTA loop: the t_k sequence, a closed-form problem, the stopping rules."""
+"""The FISTA loop: the t_k sequence, a closed-form problem, stopping rules and safeguards."""
 import math
 
 import numpy as np
+import pytest
 
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.fista import fista, next_momentum
+
+BACKEND = NumpyBackend("float64")
 
 
 def test_momentum_sequence():
@@ -19,47 +22,92 @@ def test_momentum_sequence():
     assert all(abs(t[k] ** 2 - t[k] - t[k - 1] ** 2) < 1e-12 for k in range(1, len(t)))
 
 
-def quadratic_problem(rng, m=30, n=12, mu=0.3):
+class Quadratic:
     """min ½‖Ax − b‖² + (μ/2)‖x‖², solved by x* = (AᵀA + μI)⁻¹Aᵀb."""
-    a = rng.standard_normal((m, n))
-    b = rng.standard_normal(m)
-    lipschitz = np.linalg.norm(a, 2) ** 2
-    exact = np.linalg.solve(a.T @ a + mu * np.eye(n), a.T @ b)
 
-    def gradient_step(y, out):
-        residual = a @ y - b
-        out[...] = y - a.T @ residual / lipschitz
+    def __init__(self, seed, m=30, n=12, mu=0.3):
+        rng = np.random.default_rng(seed)
+        self.a, self.b, self.mu = rng.standard_normal((m, n)), rng.standard_normal(m), mu
+        self.lipschitz = np.linalg.norm(self.a, 2) ** 2
+        self.exact = np.linalg.solve(self.a.T @ self.a + mu * np.eye(n), self.a.T @ self.b)
+
+    def gradient_step(self, y, out, step):
+        residual = self.a @ y - self.b
+        out[...] = y - step * (self.a.T @ residual)
         return 0.5 * residual @ residual
 
-    def prox(z, out):  # prox of (μ/2L)‖x‖²
-        out[...] = z / (1 + mu / lipschitz)
+    def prox(self, z, out, step):  # prox of step·(μ/2)‖x‖²
+        out[...] = z / (1 + step * self.mu)
 
-    return gradient_step, prox, exact
+    def objective(self, x):
+        residual = self.a @ x - self.b
+        return 0.5 * residual @ residual + 0.5 * self.mu * x @ x
+
+    def run(self, step_scale=1.0, **kwargs):
+        return fista(self.gradient_step, self.prox, BACKEND, np.zeros_like(self.exact),
+                     step=step_scale / self.lipschitz, **kwargs)
 
 
-def test_fista_quadratic_prior_reaches_closed_form():
-    rng = np.random.default_rng(0)
-    gradient_step, prox, exact = quadratic_problem(rng)
-    result = fista(gradient_step, prox, NumpyBackend("float64"), np.zeros_like(exact), iters=3000)
-    np.testing.assert_allclose(result.x, exact, rtol=1e-8, atol=1e-10)
+@pytest.mark.parametrize("restart", [False, True])
+def test_fista_quadratic_prior_reaches_closed_form(restart):
+    problem = Quadratic(0)
+    result = problem.run(iters=3000, restart=restart, objective=problem.objective)
+    np.testing.assert_allclose(result.x, problem.exact, rtol=1e-8, atol=1e-10)
     assert result.stop_reason == "iterations" and result.iterations == 3000
 
 
+def test_restart_fires_and_speeds_up_an_ill_conditioned_problem():
+    problem = Quadratic(3, m=40, n=40, mu=1e-4)
+    errors = {}
+    for restart in (False, True):
+        result = problem.run(iters=400, restart=restart)
+        errors[restart] = np.linalg.norm(result.x - problem.exact)
+        assert any(r["restart"] for r in result.history) == restart
+    assert errors[True] < 0.5 * errors[False]
+
+
 def test_fista_stops_on_tolerance_and_records_history():
-    rng = np.random.default_rng(1)
-    gradient_step, prox, exact = quadratic_problem(rng)
-    result = fista(gradient_step, prox, NumpyBackend("float64"), np.zeros_like(exact), iters=5000, tol=1e-6)
-    assert result.stop_reason == "tolerance"
-    assert result.iterations < 5000
+    problem = Quadratic(1)
+    result = problem.run(iters=5000, tol=1e-6)
+    assert result.stop_reason == "tolerance" and result.iterations < 5000
     assert result.history[-1]["change"] < 1e-6
     assert [r["iteration"] for r in result.history] == list(range(1, result.iterations + 1))
-    assert np.linalg.norm(result.x - exact) / np.linalg.norm(exact) < 1e-4
+    assert np.linalg.norm(result.x - problem.exact) / np.linalg.norm(problem.exact) < 1e-4
 
 
 def test_fista_should_stop_callback():
-    rng = np.random.default_rng(2)
-    gradient_step, prox, exact = quadratic_problem(rng)
+    problem = Quadratic(2)
     calls = []
-    result = fista(gradient_step, prox, NumpyBackend("float64"), np.zeros_like(exact), iters=100,
-                   should_stop=lambda: "interrupted" if len(calls.append(1) or calls) >= 7 else None)
-    assert result.stop_reason == "interrupted" and result.iterations == 7
+    result = problem.run(iters=100, should_stop=lambda: "custom" if len(calls.append(1) or calls) >= 7 else None)
+    assert result.stop_reason == "custom" and result.iterations == 7
+
+
+def test_recorded_objective_never_rises_without_restart():
+    problem = Quadratic(4, m=40, n=40, mu=1e-3)
+    result = problem.run(iters=600, restart=False, objective=problem.objective, objective_every=3)
+    values = [r["objective"] for r in result.history if np.isfinite(r["objective"])]
+    assert all(b <= a for a, b in zip(values, values[1:]))
+    assert any(r["rollback"] for r in result.history)  # plain FISTA does rise here: the checkpoint caught it
+
+
+@pytest.mark.parametrize("step_scale", [3.0, 50.0, 1e4])
+def test_too_large_a_step_is_backed_off_and_the_run_converges(step_scale):
+    problem = Quadratic(5)
+    result = problem.run(step_scale=step_scale, iters=3000, objective=problem.objective)
+    backoffs = sum(r["backoff"] for r in result.history)
+    assert backoffs >= 1 and result.step <= 2.0 / problem.lipschitz
+    assert result.stop_reason == "iterations" and np.all(np.isfinite(result.x))
+    np.testing.assert_allclose(result.x, problem.exact, rtol=1e-6, atol=1e-8)
+
+
+def test_ctrl_c_returns_the_best_iterate():
+    problem = Quadratic(6)
+
+    def interrupt(record, x):
+        if record["iteration"] == 25:
+            raise KeyboardInterrupt
+
+    result = problem.run(iters=100, objective=problem.objective, objective_every=10, on_iteration=interrupt)
+    assert result.stop_reason == "interrupted" and result.iterations == 24
+    best = min(r["objective"] for r in result.history)
+    assert problem.objective(result.x) == pytest.approx(best, rel=1e-12)
