@@ -1,4 +1,5 @@
 """The project's own set-up promises: README commands, CI script, kernels inside the wheel."""
+import os
 import subprocess
 import sys
 import zipfile
@@ -26,7 +27,7 @@ def test_ci_runs_the_readme_test_command():
     assert readme_commands()[1] in ci_lines
 
 
-def test_wheel_ships_every_kernel(tmp_path):
+def test_wheel_ships_every_kernel_and_the_installed_package_finds_them(tmp_path):
     subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp_path), str(REPO)],
                    check=True, capture_output=True, timeout=600)
     (wheel,) = tmp_path.glob("clsdcam-*.whl")
@@ -35,3 +36,12 @@ def test_wheel_ships_every_kernel(tmp_path):
     assert sources, "no kernels/*.cl in the source tree"
     assert {f"clsdcam/kernels/{name}" for name in sources} <= names
     assert "clsdcam/kernels/__init__.py" in names
+    site = tmp_path / "site"
+    subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(site), str(wheel)],
+                   check=True, capture_output=True, timeout=600)
+    code = ("import clsdcam, clsdcam.backends.cl_program as p; "
+            "print(clsdcam.__file__); print(p.kernel_dir()); print(len(p.source()))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(site)},
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out[0].startswith(str(site)) and out[1].startswith(str(site)), out
+    assert int(out[2]) > 1000
