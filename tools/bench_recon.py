@@ -98,6 +98,37 @@ def plot(results, path: Path):
     fig.savefig(path, dpi=90)
 
 
+def iteration_timing(shape, bands: int, repeat: int) -> str:
+    """Median seconds per iteration at ``shape``×``bands``: authors, NumPy, OpenCL, and the FFT floor
+    (2 rfft2 + 2 irfft2 of the K-band field, pocketfft, all cores) — one run, so ratios are fair."""
+    import scipy.fft
+
+    sim = simulate(scene="target", shape=shape, n_bands=bands, seed=0)
+    authors = AuthorsSolver(sim.calibration.psf, sim.calibration.filters)
+    rows = {"authors (complex128, as published)": _median_seconds(
+        lambda: list(authors.run(sim.measurement, 3)), repeat) / 3}
+    for name, (backend, dtype) in CONFIGS.items():  # whole solves of 10 iterations: set-up included
+        solver = Solver(sim.calibration, backend=backend, settings=Settings(iters=10, dtype=dtype))
+        rows[f"clsdcam {name}"] = _median_seconds(lambda: solver.solve(sim.measurement), repeat) / 10
+    field = np.zeros((bands, 2 * shape[0], 2 * shape[1]), np.float32)
+    spectrum = scipy.fft.rfft2(field, workers=-1)
+    rows["FFT floor (float32, 4 transforms of K bands)"] = 2 * _median_seconds(
+        lambda: (scipy.fft.rfft2(field, workers=-1), scipy.fft.irfft2(spectrum, s=field.shape[1:], workers=-1)), repeat)
+    authors = rows["authors (complex128, as published)"]
+    lines = [f"| per iteration, {bands}×{shape[0]}×{shape[1]} | seconds | vs authors |", "|---|---:|---:|"]
+    lines += [f"| {name} | {sec:.3f} | {authors / sec:.1f}× |" for name, sec in rows.items()]
+    return "\n".join(lines)
+
+
+def _median_seconds(run, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        run()
+        times.append(time.perf_counter() - start)
+    return float(np.median(times))
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", default="leds,target,piecewise,realcube")
@@ -107,7 +138,13 @@ def main(argv=None) -> int:
     parser.add_argument("--reference-iters", type=int, default=3000)
     parser.add_argument("--configs", default=",".join(CONFIGS), help=f"from: {', '.join(CONFIGS)}")
     parser.add_argument("--out", default="bench-recon")
+    parser.add_argument("--timing-size", default=None, metavar="HxW",
+                        help="instead: seconds per iteration at this size (e.g. 320x448) and --bands, all solvers")
+    parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args(argv)
+    if args.timing_size:
+        print(iteration_timing(tuple(int(v) for v in args.timing_size.split("x")), args.bands, args.repeat))
+        return 0
     shape = tuple(int(v) for v in args.size.split("x"))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
