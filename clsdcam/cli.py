@@ -1,4 +1,4 @@
-"""The ``clsdcam`` command line: reconstruct, simulate, demo, devices.
+"""The ``clsdcam`` command line: reconstruct, simulate, demo, devices, analyze.
 
 Exit codes: 0 success, 2 bad input (one line on stderr, no traceback, no output file),
 130 interrupted (no partial output file).
@@ -116,6 +116,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_solver_options(demo)
 
     sub.add_parser("devices", help="list OpenCL platforms and devices (memory, compute units, fp64)")
+    from . import cli_analyze
+
+    cli_analyze.add_parser(sub, _size)
     return parser
 
 
@@ -307,7 +310,14 @@ def _describe(shape) -> str:
     return "×".join(str(n) for n in shape)
 
 
-COMMANDS = {"reconstruct": cmd_reconstruct, "simulate": cmd_simulate, "demo": cmd_demo, "devices": cmd_devices}
+def cmd_analyze(args) -> int:
+    from .cli_analyze import run
+
+    return run(args)
+
+
+COMMANDS = {"reconstruct": cmd_reconstruct, "simulate": cmd_simulate, "demo": cmd_demo, "devices": cmd_devices,
+            "analyze": cmd_analyze}
 
 
 def main(argv=None) -> int:

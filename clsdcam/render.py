@@ -262,3 +262,48 @@ def save_pictures(prefix, cube, wavelengths, history=None, points=None, truth=No
     with atomic_output(paths[0]) as tmp:
         matplotlib.image.imsave(tmp, image, format="png")
     return [paths[0], *(_save(fig, path) for fig, path in zip(figures.values(), paths[1:]))]
+
+
+# ---- analysis pictures (clsdcam analyze) ---------------------------------------------------
+def save_curves(path, title: str, xlabel: str, ylabel: str, curves: dict, log_y: bool = False,
+                hline: float | None = None) -> Path:
+    """Line plot of ``curves`` {label: (x, y)}; optional horizontal reference line."""
+    fig = _figure(figsize=(6, 4))
+    ax = fig.subplots()
+    for label, (x, y) in curves.items():
+        ax.plot(x, y, marker=".", label=label)
+    if hline is not None:
+        ax.axhline(hline, color="grey", linestyle="--", linewidth=1)
+    ax.set(title=title, xlabel=xlabel, ylabel=ylabel, yscale="log" if log_y else "linear")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, Path(path))
+
+
+def save_autocorrelation(path, corr: np.ndarray, halfwidth_px: float) -> Path:
+    """The central part of the PSF autocorrelation with its 70 % contour."""
+    reach = int(max(4, 4 * halfwidth_px))
+    cy, cx = corr.shape[0] // 2, corr.shape[1] // 2
+    crop = corr[cy - reach:cy + reach + 1, cx - reach:cx + reach + 1]
+    fig = _figure(figsize=(4.5, 4))
+    ax = fig.subplots()
+    extent = (-reach - 0.5, reach + 0.5, reach + 0.5, -reach - 0.5)
+    ax.imshow(crop, extent=extent, cmap="magma")
+    ax.contour(np.arange(-reach, reach + 1), np.arange(-reach, reach + 1), crop, levels=[0.7], colors="cyan")
+    ax.set(title=f"PSF autocorrelation; 70 % half-width {halfwidth_px:.2f} px", xlabel="Δx (px)", ylabel="Δy (px)")
+    return _save(fig, Path(path))
+
+
+def save_design_pictures(path, designs: dict) -> Path:
+    """Per design: false colour and the y–λ sum projection, side by side."""
+    fig = _figure(figsize=(4.2 * len(designs), 6.5))
+    axes = fig.subplots(2, len(designs), squeeze=False)
+    for column, (name, row) in enumerate(designs.items()):
+        cube, wavelengths = row["cube"], row["wavelengths"]
+        axes[0, column].imshow(false_colour(cube, wavelengths), interpolation="nearest")
+        axes[0, column].set(title=f"{name}: {row['psnr']:.1f} dB, {row['angle']:.1f}°")
+        edges = band_edges(wavelengths)
+        axes[1, column].pcolormesh(edges, np.arange(cube.shape[1] + 1) - 0.5, cube.sum(axis=2).T, shading="flat")
+        axes[1, column].set(xlabel="wavelength (nm)", ylabel="y (px)")
+        axes[1, column].invert_yaxis()
+    return _save(fig, Path(path))

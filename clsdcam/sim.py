@@ -575,3 +575,27 @@ def write_simulation(outdir, sim: Simulation) -> dict[str, Path]:
     save_measurement(paths["measurement.npy"], sim.measurement)
     write_truth(paths["truth.h5"], sim.truth, sim.calibration.wavelengths)
     return {"calibration": paths["calibration.h5"], "measurement": paths["measurement.npy"], "truth": paths["truth.h5"]}
+
+
+# ---- lens comparators (the paper's Fig. 7) ----------------------------------------------
+
+SUPERPIXEL_PX = TILE * 2  # one 8×8 tile of 2-pixel filters
+
+
+def lens_psf(shape=DEFAULT_SHAPE, spot_px: int = 2) -> np.ndarray:
+    """A focused lens: a uniform ``spot_px`` × ``spot_px`` square at the frame centre (H//2, W//2)
+    (top-left corner (H//2 − (spot_px−1)//2, …)), unit L2 norm, float32.
+
+    spot_px = 2 (one filter pixel) is the paper's high-NA lens; 16 (one super-pixel) its low-NA lens.
+    """
+    psf = np.zeros(shape, np.float32)
+    y0, x0 = shape[0] // 2 - (spot_px - 1) // 2, shape[1] // 2 - (spot_px - 1) // 2
+    psf[y0:y0 + spot_px, x0:x0 + spot_px] = 1.0
+    return psf / np.linalg.norm(psf)
+
+
+DESIGNS = {  # name -> PSF builder (shape, seed)
+    "diffuser": lambda shape, seed: caustic_psf(shape, seed),
+    "low-NA lens": lambda shape, seed: lens_psf(shape, SUPERPIXEL_PX),
+    "high-NA lens": lambda shape, seed: lens_psf(shape, 2),
+}
