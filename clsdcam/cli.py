@@ -1,4 +1,4 @@
-"""The ``clsdcam`` command line: reconstruct, simulate, demo, devices, analyze.
+"""The ``clsdcam`` command line: reconstruct, simulate, demo, batch, devices, analyze.
 
 Exit codes: 0 success, 2 bad input (one line on stderr, no traceback, no output file),
 130 interrupted (no partial output file).
@@ -55,7 +55,7 @@ def _size(text: str) -> tuple[int, int]:
     return tuple(_positive_int(p) for p in parts)
 
 
-def _add_solver_options(p: argparse.ArgumentParser):
+def add_solver_options(p: argparse.ArgumentParser):
     from .solver import DEFAULT_ITERS, DEFAULT_TOL, DEFAULT_TV
 
     p.add_argument("--backend", default="numpy", help="numpy (reference) or opencl")
@@ -78,7 +78,7 @@ def _add_solver_options(p: argparse.ArgumentParser):
                    help="on Ctrl-C, write the best cube so far (default: write nothing)")
 
 
-def _add_preprocessing_options(p: argparse.ArgumentParser):
+def add_preprocessing_options(p: argparse.ArgumentParser):
     p.add_argument("--crop", default=None, metavar="Y0:Y1,X0:X1", help="crop calibration and measurement")
     p.add_argument("--reference-preprocess", action="store_true",
                    help="the authors' preprocessing: crop 100:420,80:540, zero the defect block, drop band 65")
@@ -101,11 +101,13 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--calibration", required=True, help="calibration.mat (psf, mask, wavs) or our .h5")
     rec.add_argument("-o", "--output", required=True, help="output cube, HDF5")
     rec.add_argument("--truth", default=None, help="true cube (.h5 with 'cube') to print PSNR and spectral angle")
-    _add_solver_options(rec)
-    _add_preprocessing_options(rec)
+    add_solver_options(rec)
+    add_preprocessing_options(rec)
 
     sim = sub.add_parser("simulate", help="simulate a camera, a scene and its measurement")
     sim.add_argument("outdir")
+    sim.add_argument("--frames", type=_positive_int, default=None,
+                     help="write a video of N frames of the scene drifting (frames.npy, truth.h5)")
     _add_simulation_options(sim)
 
     demo = sub.add_parser("demo", help="simulate the default scene, reconstruct it, report accuracy and time")
@@ -113,12 +115,13 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--report-at", type=_iterations, default=(), metavar="N,N,...",
                       help="also print the accuracy after these iterations, e.g. 100,500")
     _add_simulation_options(demo)
-    _add_solver_options(demo)
+    add_solver_options(demo)
 
     sub.add_parser("devices", help="list OpenCL platforms and devices (memory, compute units, fp64)")
-    from . import cli_analyze
+    from . import cli_analyze, cli_batch
 
     cli_analyze.add_parser(sub, _size)
+    cli_batch.add_parser(sub)
     return parser
 
 
@@ -137,7 +140,7 @@ def cmd_reconstruct(args) -> int:
 
     calibration = Calibration.load(args.calibration)
     measurement = load_measurement(args.measurement)
-    calibration, measurement = preprocess(calibration, measurement, _preprocessing(args))
+    calibration, measurement = preprocess(calibration, measurement, preprocessing(args))
     truth = _read_truth(args.truth) if args.truth else None
     expected = (calibration.n_bands,) + measurement.shape
     if truth is not None and truth.shape != expected:
@@ -152,10 +155,21 @@ def cmd_reconstruct(args) -> int:
 def cmd_simulate(args) -> int:
     from .sim import simulate, write_simulation
 
+    if args.frames:
+        return _simulate_video(args)
     sim = simulate(**_simulation_kwargs(args))
     paths = write_simulation(args.outdir, sim)
     print(f"simulated scene {sim.scene!r} ({_describe(sim.truth.shape)}): " +
           ", ".join(str(p) for p in paths.values()))
+    return 0
+
+
+def _simulate_video(args) -> int:
+    from .video import simulate_video, write_video
+
+    calibration, frames, truth = simulate_video(args.scene, args.frames, args.size, args.bands, args.seed)
+    paths = write_video(args.outdir, calibration, frames, truth)
+    print(f"simulated {args.frames} frames of {args.scene!r}: " + ", ".join(str(p) for p in paths.values()))
     return 0
 
 
@@ -195,7 +209,7 @@ def _simulation_kwargs(args) -> dict:
     return kwargs
 
 
-def _preprocessing(args):
+def preprocessing(args):
     from .calibration import Preprocessing, parse_crop
 
     base = Preprocessing.reference() if args.reference_preprocess else Preprocessing()
@@ -221,13 +235,19 @@ def _dead_pixels(path, crop):
     return mask if crop is None else mask[crop[0]:crop[1], crop[2]:crop[3]]
 
 
+def settings(args):
+    """Solver settings from the command-line options."""
+    from .solver import Settings
+
+    return Settings(iters=args.iters, tv=args.tv, tv_weights=args.tv_weights, lowrank=args.lowrank,
+                    tol=args.tol, dtype=args.dtype, full_field=args.full_field)
+
+
 def _solve(args, calibration, measurement, snapshots=()):
     """Build the solver and run it with a progress bar; Ctrl-C without --save-on-interrupt propagates."""
-    from .solver import Settings, Solver
+    from .solver import Solver
 
-    settings = Settings(iters=args.iters, tv=args.tv, tv_weights=args.tv_weights, lowrank=args.lowrank,
-                        tol=args.tol, dtype=args.dtype, full_field=args.full_field)
-    solver = Solver(calibration, backend=args.backend, device=args.device, settings=settings, fft=args.fft)
+    solver = Solver(calibration, backend=args.backend, device=args.device, settings=settings(args), fft=args.fft)
     if not args.quiet:
         print(f"backend {solver.backend.name} on {solver.backend.device_name} (FFT: {solver.backend.fft_engine}); field "
               f"{_describe(solver.model.cube_shape)}; L = {solver.lipschitz:.4g}", file=sys.stderr)
@@ -310,6 +330,12 @@ def _describe(shape) -> str:
     return "×".join(str(n) for n in shape)
 
 
+def cmd_batch(args) -> int:
+    from .cli_batch import run
+
+    return run(args)
+
+
 def cmd_analyze(args) -> int:
     from .cli_analyze import run
 
@@ -317,7 +343,7 @@ def cmd_analyze(args) -> int:
 
 
 COMMANDS = {"reconstruct": cmd_reconstruct, "simulate": cmd_simulate, "demo": cmd_demo, "devices": cmd_devices,
-            "analyze": cmd_analyze}
+            "analyze": cmd_analyze, "batch": cmd_batch}
 
 
 def main(argv=None) -> int:

@@ -108,7 +108,7 @@ class Solver:
               progress: Callable[[dict], None] | None = None, snapshots=()) -> Result:
         """Reconstruct one (H, W) measurement.
 
-        x0 is an optional (K, H, W) warm start in data units; ``snapshots`` lists iterations at
+        x0 is an optional warm start in data units: a (K, H, W) cube or a whole field (``Result.full_field``); ``snapshots`` lists iterations at
         which a copy of the cube is kept in ``Result.snapshots`` (e.g. to measure accuracy on the way).
         """
         b = self._checked(measurement)
@@ -119,7 +119,7 @@ class Solver:
         self._b = be.to_device(b / scale)
         regularizer = self._regularizer()
         prox = Prox(be, regularizer, model.cube_shape)
-        start = model.embed(np.zeros(self._cube_window_shape()) if x0 is None else np.asarray(x0) / scale)
+        start = self._start(x0, scale)
         kept: dict[int, np.ndarray] = {}
 
         def on_iteration(record, x):
@@ -146,6 +146,18 @@ class Solver:
         if check is not None:
             shape = self.calibration.psf.shape
             check(shape, default_field_shape(shape), self.calibration.filters.shape[0])
+
+    def _start(self, x0, scale: float):
+        """The first iterate: zero, a (K, H, W) sensor-window cube (zero around it), or a whole field."""
+        if x0 is None:
+            return self.model.embed(np.zeros(self._cube_window_shape()))
+        x0 = np.asarray(x0) / scale
+        if x0.shape == self.model.cube_shape:
+            return self.backend.to_device(x0)
+        if x0.shape != self._cube_window_shape():
+            raise InputError(f"warm start {_shape(x0.shape)}: expected {_shape(self._cube_window_shape())} "
+                             f"or the field {_shape(self.model.cube_shape)}")
+        return self.model.embed(x0)
 
     def _cube_window_shape(self):
         return (self.model.n_bands,) + self.model.sensor_shape

@@ -1,0 +1,57 @@
+"""``clsdcam batch FRAMES... --calibration CAL -o OUT.h5``: many frames, on Dask distributed."""
+from __future__ import annotations
+
+import sys
+
+from .errors import InputError
+
+
+def add_parser(subparsers):
+    from .cli import add_preprocessing_options, add_solver_options
+
+    p = subparsers.add_parser("batch", help="reconstruct many frames (warm-started streams on Dask workers)")
+    p.add_argument("frames", nargs="+", help="frame files, a folder of them, or one stack (.npy/.h5 (N,H,W), TIFF)")
+    p.add_argument("--calibration", required=True)
+    p.add_argument("-o", "--output", required=True, help="OUT.h5 (parts in OUT.h5.parts/)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=1,
+                       help="worker processes of an embedded Dask LocalCluster (0: one in-process stream; default 1)")
+    where.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
+    p.add_argument("--chunk", type=int, default=None, help="frames per task (default: N / (2·workers))")
+    p.add_argument("--no-warm-start", action="store_true", help="start every frame from zero")
+    p.add_argument("--overwrite", action="store_true", help="recompute everything (default: only missing chunks)")
+    add_solver_options(p)
+    add_preprocessing_options(p)
+
+
+def run(args) -> int:
+    from .batch import BatchSpec, run_batch
+    from .cli import preprocessing, settings
+
+    for flag, value in (("--png", args.png), ("--full-field", args.full_field), ("--saturation", args.saturation)):
+        if value:
+            raise InputError(f"{flag} is not available in batch (per-frame pictures, fields or pixel masks)")
+    if args.workers < 0 or (args.chunk is not None and args.chunk < 1):
+        raise InputError("--workers must be ≥ 0 and --chunk ≥ 1")
+    spec = BatchSpec(frames=tuple(args.frames), calibration=args.calibration, preprocessing=preprocessing(args),
+                     settings=settings(args), backend=args.backend, device=args.device, fft=args.fft,
+                     warm_start=not args.no_warm_start)
+    from .frames import FrameSource
+
+    bar = None if args.quiet else _bar(len(FrameSource(spec.frames)))
+    summary = run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,
+                        overwrite=args.overwrite, progress=None if bar is None else bar.update)
+    if bar is not None:
+        bar.close()
+    rate = summary.computed_frames / summary.seconds if summary.seconds else 0.0
+    print(f"wrote {args.output}: {summary.n_frames} frames ({summary.computed_frames} computed now, "
+          f"{rate:.2f} frames/s), {len(summary.failed)} failed")
+    for index, reason in summary.failed:
+        print(f"  frame {index}: {reason}", file=sys.stderr)
+    return summary.exit_code
+
+
+def _bar(total: int):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="frame", file=sys.stderr, dynamic_ncols=True)
