@@ -1,21 +1,24 @@
 """Many frames: frame sources, one stream, Dask workers (embedded and external), killed workers,
-resumed batches and failed frames."""
+resumed and interrupted batches, failed frames."""
+import logging
 import os
-import signal
 import socket
 import subprocess
 import sys
-import threading
-import time
+from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 import tifffile
+from distributed import Client, LocalCluster
+from distributed.diagnostics.plugin import WorkerPlugin
 
+import clsdcam.batch as batch
 from clsdcam.batch import BatchSpec, parts_dir, run_batch
 from clsdcam.calibration import Calibration, Preprocessing, preprocess
 from clsdcam.cli import main
+from clsdcam.errors import InputError
 from clsdcam.frames import FrameSource
 from clsdcam.solver import Settings, reconstruct
 from clsdcam.video import simulate_video, write_video
@@ -41,6 +44,11 @@ def cubes(path):
         return f["cubes"][...], f["iterations"][...], f["error"].asstr()[...]
 
 
+def local_cluster():
+    return LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                        silence_logs=logging.CRITICAL)
+
+
 def cold_reference(video, iters=30):
     """Each frame alone, as ``clsdcam reconstruct`` does it (default preprocessing, cold start)."""
     calibration = Calibration.load(video["calibration"])
@@ -64,18 +72,21 @@ def test_frame_sources_agree(video, tmp_path):
     for source in sources:
         assert len(source) == N_FRAMES
         np.testing.assert_array_equal(source.read(5), frames[5])
+    with pytest.raises(InputError, match="not found"):
+        FrameSource([str(folder / "f00.npy"), str(folder / "missing.npy")])
 
 
 def test_two_dask_workers_match_serial_cold_starts(video, tmp_path):
-    summary = run_batch(spec(video, warm=False), tmp_path / "out.h5", workers=2, chunk=3)
-    assert summary.computed_frames == N_FRAMES and summary.exit_code == 0
+    counted = []
+    summary = run_batch(spec(video, warm=False), tmp_path / "out.h5", workers=2, chunk=3, progress=counted.append)
+    assert summary.computed_frames == N_FRAMES and summary.exit_code == 0 and sum(counted) == N_FRAMES
     got, iterations, errors = cubes(tmp_path / "out.h5")
     np.testing.assert_allclose(got, cold_reference(video), rtol=1e-5, atol=1e-6 * got.max())
     assert (iterations == 30).all() and not any(errors)
 
 
 def test_warm_start_stream_in_process(video, tmp_path):
-    summary = run_batch(spec(video, iters=30), tmp_path / "warm.h5", workers=0, chunk=N_FRAMES)
+    summary = run_batch(spec(video, iters=30), tmp_path / "warm.h5", workers=0, chunk=3)
     got, _, _ = cubes(tmp_path / "warm.h5")
     cold = cold_reference(video)
     np.testing.assert_allclose(got[0], cold[0], rtol=1e-5, atol=1e-6 * got.max())  # frame 0 has no predecessor
@@ -85,33 +96,64 @@ def test_warm_start_stream_in_process(video, tmp_path):
 def test_resume_computes_only_the_missing_frames(video, tmp_path):
     output = tmp_path / "out.h5"
     run_batch(spec(video), output, workers=0, chunk=2)
-    for part in sorted(parts_dir(output).iterdir())[1:3]:  # as if a crash lost two chunks
+    for part in sorted(parts_dir(output).glob("chunk-*.h5"))[1:3]:  # as if a crash lost two chunks (frames 2–5)
         part.unlink()
-    assert run_batch(spec(video), output, workers=0, chunk=2).computed_frames == 4
+    counted = []
+    assert run_batch(spec(video), output, workers=0, chunk=3, progress=counted.append).computed_frames == 4
+    assert sum(counted) == 4  # another chunk size still computes only frames 2–5
+    assert sorted(p.name for p in parts_dir(output).glob("chunk-*.h5"))[1:3] == [
+        "chunk-000002-000005.h5", "chunk-000005-000006.h5"]
     assert run_batch(spec(video), output, workers=0, chunk=2).computed_frames == 0
-    assert run_batch(spec(video), output, workers=0, chunk=2, overwrite=True).computed_frames == N_FRAMES
     assert np.isfinite(cubes(output)[0]).all()
+    with pytest.raises(InputError, match="another batch"):  # other settings never mix with these parts
+        run_batch(spec(video, iters=20), output, workers=0)
+    assert run_batch(spec(video, iters=20), output, workers=0, overwrite=True).computed_frames == N_FRAMES
 
 
-def test_a_killed_worker_loses_no_frame(video, tmp_path):
-    import logging
+def test_an_interrupted_batch_resumes(video, tmp_path, monkeypatch):
+    """Ctrl-C (a KeyboardInterrupt while frame 5 is read) keeps the finished chunks and nothing else."""
+    output, read = tmp_path / "out.h5", batch._read
 
-    from dask.distributed import Client, LocalCluster
+    def interrupted(source, i):
+        if i == 5:
+            raise KeyboardInterrupt
+        return read(source, i)
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
-        pids = list(client.run(os.getpid).values())
-        killer = threading.Timer(1.0, os.kill, (pids[0], signal.SIGKILL))
-        killer.start()
-        summary = run_batch(spec(video, iters=1500), tmp_path / "out.h5", scheduler=cluster.scheduler_address, chunk=1)
-        killer.join()
-        assert summary.seconds > 1.0  # the kill came while the batch ran …
-        client.wait_for_workers(2, timeout=60)
-        assert pids[0] not in client.run(os.getpid).values()  # … and the nanny replaced the killed worker
-    got, iterations, errors = cubes(tmp_path / "out.h5")
-    assert summary.exit_code == 0 and np.isfinite(got).all() and (iterations == 1500).all()
-    assert sorted(p.name for p in parts_dir(tmp_path / "out.h5").iterdir()) == [
-        f"chunk-{i:06d}-{i + 1:06d}.h5" for i in range(N_FRAMES)]
+    monkeypatch.setattr(batch, "_read", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_batch(spec(video), output, workers=0, chunk=2)
+    monkeypatch.setattr(batch, "_read", read)
+    assert not output.exists() and not [p for p in parts_dir(output).iterdir() if p.name.startswith(".")]
+    assert run_batch(spec(video), output, workers=0, chunk=2).computed_frames == 4
+
+
+class KillOnce(WorkerPlugin):
+    """Kills its worker process (os._exit) twice in a batch, once per marker file: when a chunk task
+    starts, then when a chunk task has written its part but its worker has not yet reported it."""
+
+    def __init__(self, folder):
+        self.folder = Path(folder)
+
+    def transition(self, key, start, finish, **kwargs):
+        running, finished = self.folder / "killed-running", self.folder / "killed-finished"
+        marker = {"executing": running, "memory": finished}.get(finish)
+        if "clsdcam-chunk" in str(key) and marker and not marker.exists() and (marker is running or running.exists()):
+            marker.write_text(str(os.getpid()))
+            os._exit(1)
+
+
+def test_killed_workers_lose_no_frame_and_write_none_twice(video, tmp_path):
+    output = tmp_path / "out.h5"
+    with local_cluster() as cluster, Client(cluster) as client:
+        client.register_plugin(KillOnce(tmp_path))
+        summary = run_batch(spec(video), output, scheduler=cluster.scheduler_address, chunk=1)
+    assert summary.exit_code == 0 and np.isfinite(cubes(output)[0]).all()
+    parts = sorted(parts_dir(output).glob("chunk-*.h5"))
+    assert [p.name for p in parts] == [f"chunk-{i:06d}-{i + 1:06d}.h5" for i in range(N_FRAMES)]
+    writers = [h5py.File(p, "r").attrs["writer"].split(":")[-1] for p in parts]
+    assert (tmp_path / "killed-running").read_text() not in writers
+    # the part of the worker killed before it reported was kept (Dask re-ran the task; it wrote nothing)
+    assert (tmp_path / "killed-finished").read_text() in writers
 
 
 def free_port() -> int:
@@ -121,25 +163,27 @@ def free_port() -> int:
 
 
 def test_external_scheduler_and_worker(video, tmp_path):
-    from dask.distributed import Client
-
-    port = free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
-    scheduler = subprocess.Popen(dask + ["--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
-                               "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    """``dask scheduler`` and ``dask worker`` as the user starts them; shut down by the client."""
+    address = f"tcp://127.0.0.1:{free_port()}"
+    dask = [sys.executable, "-m", "dask"]
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    scheduler = subprocess.Popen(dask + ["scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1],
+                                         "--no-dashboard"], **quiet)
+    worker = subprocess.Popen(dask + ["worker", address, "--nthreads", "1", "--no-dashboard",
+                                      "--listen-address", "tcp://127.0.0.1:0"], **quiet)
     try:
         with Client(address, timeout=60) as client:
             client.wait_for_workers(1, timeout=60)
-        code = main(["batch", str(video["frames"]), "--calibration", str(video["calibration"]), "-o",
-                     str(tmp_path / "out.h5"), "--scheduler", address, "--iters", "20", "--quiet"])
-        assert code == 0 and np.isfinite(cubes(tmp_path / "out.h5")[0]).all()
+            code = main(["batch", str(video["frames"]), "--calibration", str(video["calibration"]), "-o",
+                         str(tmp_path / "out.h5"), "--scheduler", address, "--iters", "20", "--quiet"])
+            assert code == 0 and np.isfinite(cubes(tmp_path / "out.h5")[0]).all()
+            client.shutdown()
+        assert scheduler.wait(timeout=30) == 0 and worker.wait(timeout=30) == 0
     finally:
         for process in (worker, scheduler):
-            process.terminate()
-            process.wait(timeout=30)
+            if process.poll() is None:
+                process.kill()
+                process.wait()
 
 
 def test_a_bad_frame_is_recorded_and_the_rest_go_on(video, tmp_path, capsys):
@@ -149,10 +193,20 @@ def test_a_bad_frame_is_recorded_and_the_rest_go_on(video, tmp_path, capsys):
     frames[3, 2, 2] = np.nan
     for i, frame in enumerate(frames):
         np.save(folder / f"f{i:02d}.npy", frame)
+    (folder / "f06.npy").write_bytes(b"not a numpy file")
     code = main(["batch", str(folder), "--calibration", str(video["calibration"]), "-o", str(tmp_path / "out.h5"),
                  "--workers", "0", "--iters", "10", "--quiet"])
     assert code == 1
     got, _, errors = cubes(tmp_path / "out.h5")
-    assert "non-finite" in errors[3] and np.isnan(got[3]).all()
-    assert np.isfinite(np.delete(got, 3, axis=0)).all()
+    assert "non-finite" in errors[3] and "f06.npy" in errors[6] and np.isnan(got[[3, 6]]).all()
+    assert np.isfinite(np.delete(got, [3, 6], axis=0)).all()
     assert "frame 3" in capsys.readouterr().err
+
+
+def test_simulate_frames_writes_a_video(tmp_path):
+    assert main(["simulate", str(tmp_path / "v"), "--frames", "3", "--size", "16x20", "--bands", "2"]) == 0
+    frames = np.load(tmp_path / "v" / "frames.npy")
+    with h5py.File(tmp_path / "v" / "truth.h5", "r") as f:
+        truth = f["cubes"][...]
+    assert frames.shape == (3, 16, 20) and truth.shape == (3, 2, 16, 20)
+    assert not np.allclose(truth[0], truth[2])  # the scene moves
