@@ -204,7 +204,7 @@ def test_a_bad_frame_is_recorded_and_the_rest_go_on(video, tmp_path, capsys):
 
 
 def test_simulate_frames_writes_a_video(tmp_path):
-    assert main(["simulate", str(tmp_path / "v"), "--frames", "3", "--size", "16x20", "--bands", "2"]) == 0
+    assert main(["simulate", str(tmp_path / "v"), "--frames", "3", "--size", "16x20", "--bands", "2", "--scene", "leds"]) == 0
     frames = np.load(tmp_path / "v" / "frames.npy")
     with h5py.File(tmp_path / "v" / "truth.h5", "r") as f:
         truth = f["cubes"][...]
