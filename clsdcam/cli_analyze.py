@@ -1,7 +1,15 @@
-"""``clsdcam analyze WHAT OUTDIR``: the paper's analyses, each writing JSON and a PNG into OUTDIR;
-``all`` also writes ``report.html`` and prints the summary table next to the paper's values."""
+"""``clsdcam analyze {resolution,condition,designs,spectral,twopoint,all} OUTDIR``: the paper's
+analyses, each writing ``NAME.json`` and ``NAME.png`` into OUTDIR; ``all`` also writes
+``report.html`` and ``summary.md`` and prints the summary table next to the paper's values.
+
+Sizes (options of every sub-choice, recorded in each JSON): the PSF and condition-number
+analyses use ``--size`` (default the prototype's 320×448); the reconstructions use
+``--recon-size`` (default 64×96), ``--bands`` (64) and ``--iters`` (200), because a full
+320×448×64 reconstruction costs seconds per iteration.
+"""
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import time
@@ -10,27 +18,66 @@ from pathlib import Path
 import numpy as np
 
 from . import analysis, render, sim
-from .io import atomic_output
+from .io import atomic_output, load_measurement
 
-SEPARATIONS = tuple(range(1, 25))
+SEPARATIONS = (1, 2, 3, 4, 5, 6, 7, 8, 10, 12, 14, 16, 20, 24, 32)
+GROUP_SIZES = (2, 4, 9, 16)
 REAL_PSFS = {"Spectral DiffuserScope (measured)": "psf/spectraldiffuserscope_psf.npy",
              "DiffuserCam tutorial (measured)": "psf/diffusercam_tutorial_psf_sample.tif"}
+ANALYSES = ("resolution", "condition", "designs", "spectral", "twopoint")
+HELP = {"resolution": "PSF autocorrelation half-width at 70 % (simulated and measured PSFs)",
+        "condition": "local condition numbers of groups of points: diffuser, low-NA and high-NA lenses",
+        "designs": "the resolution target through the three designs: PSNR, spectral angle, pictures",
+        "spectral": "peak-wavelength error of narrow-band point sources over 386–898 nm",
+        "twopoint": "two-point resolution at 618, 522, 466 nm by the Rayleigh criterion",
+        "all": "every analysis, a summary table and report.html"}
 
 
-def add_parser(subparsers, size_type):
-    p = subparsers.add_parser("analyze", help="the paper's resolution analyses (JSON + PNG per analysis)")
-    p.add_argument("what", choices=("resolution", "condition", "designs", "spectral", "twopoint", "all"))
-    p.add_argument("outdir")
-    p.add_argument("--size", type=size_type, default=sim.DEFAULT_SHAPE, metavar="HxW",
-                   help="sensor size for PSF and condition-number analyses (default 320x448)")
-    p.add_argument("--recon-size", type=size_type, default=(64, 96), metavar="HxW",
-                   help="sensor size of the reconstruction analyses (default 64x96)")
-    p.add_argument("--bands", type=int, default=64, help="bands of the reconstruction analyses (default 64)")
-    p.add_argument("--iters", type=int, default=200, help="iterations of each reconstruction (default 200)")
-    p.add_argument("--seed", type=int, default=0)
+def parse_size(text: str) -> tuple[int, int]:
+    """'HxW' (or 'H×W') -> (H, W), both ≥ 8."""
+    try:
+        h, w = (int(v) for v in text.replace("×", "x").lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected HxW, e.g. 64x96") from None
+    if min(h, w) < 8:
+        raise argparse.ArgumentTypeError(f"{text!r}: both sides must be ≥ 8")
+    return h, w
+
+
+def _at_least(low: int):
+    """An argparse type: an integer ≥ ``low``."""
+    def parse(text: str) -> int:
+        value = int(text)
+        if value < low:
+            raise argparse.ArgumentTypeError(f"{text}: must be ≥ {low}")
+        return value
+    return parse
+
+
+def add_parser(subparsers, size_type=None) -> argparse.ArgumentParser:
+    """The ``analyze`` subcommand with one sub-choice per analysis (dest ``what``), each taking OUTDIR
+    and the size options; ``size_type`` parses HxW (default :func:`parse_size`)."""
+    size_type = size_type or parse_size
+    options = argparse.ArgumentParser(add_help=False)
+    options.add_argument("outdir", help="folder for the JSON, PNG (and report) files")
+    options.add_argument("--size", type=size_type, default=sim.DEFAULT_SHAPE, metavar="HxW",
+                         help="sensor of the PSF and condition-number analyses (default 320x448)")
+    options.add_argument("--recon-size", type=size_type, default=(64, 96), metavar="HxW",
+                         help="sensor of the reconstruction analyses (default 64x96)")
+    options.add_argument("--bands", type=_at_least(2), default=64,
+                         help="bands of the filter array and the reconstructions (default 64)")
+    options.add_argument("--iters", type=_at_least(1), default=200, help="iterations per reconstruction (default 200)")
+    options.add_argument("--trials", type=_at_least(1), default=5, help="random placements per condition number (default 5)")
+    options.add_argument("--seed", type=int, default=0)
+    parser = subparsers.add_parser("analyze", help="the paper's resolution analyses (JSON + PNG per analysis)")
+    which = parser.add_subparsers(dest="what", required=True, metavar="{" + ",".join(ANALYSES + ("all",)) + "}")
+    for name in ANALYSES + ("all",):
+        which.add_parser(name, parents=[options], help=HELP[name], description=HELP[name])
+    return parser
 
 
 def run(args) -> int:
+    """Run the chosen analyses; print where each went; for ``all`` the summary table and the report."""
     out = Path(args.outdir)
     out.mkdir(parents=True, exist_ok=True)
     names = ANALYSES if args.what == "all" else (args.what,)
@@ -38,131 +85,166 @@ def run(args) -> int:
     for name in names:
         start = time.perf_counter()
         results[name] = RUNNERS[name](args, out)
-        _write_json(out / f"{name}.json", results[name])
-        print(f"{name}: {out / (name + '.json')}, {out / (name + '.png')} ({time.perf_counter() - start:.0f} s)")
+        results[name]["seconds"] = round(time.perf_counter() - start, 1)
+        write_json(out / f"{name}.json", results[name])
+        print(f"{name}: {out / (name + '.json')}, {out / (name + '.png')} ({results[name]['seconds']:.0f} s)")
     if args.what == "all":
         table = summary_table(results)
         print(table)
-        _write_report(out, table)
+        with atomic_output(out / "summary.md") as tmp:
+            tmp.write_text(table + "\n", encoding="utf-8")
+        write_report(out, table, results)
     return 0
 
 
-# ---- the analyses ----------------------------------------------------------------------------
+# ---- the analyses ------------------------------------------------------------------------------
 def run_resolution(args, out: Path) -> dict:
+    """The simulated caustic at --size, then each measured PSF present (dark ring subtracted, binned)."""
     psf = sim.caustic_psf(tuple(args.size), args.seed)
-    result = {"simulated caustic": _resolution(psf)}
+    result = {"simulated caustic": psf_resolution(psf, out / "resolution.png", 1)}
     for label, relative in REAL_PSFS.items():
         path = sim.shared_data_dir() / relative
-        if path.exists():
-            result[label] = _resolution(_load_psf(path))
-    render.save_autocorrelation(out / "resolution.png", sim.autocorrelation(psf), result["simulated caustic"]["pixels"])
-    return result
+        if not path.exists():
+            result[label] = {"skipped": f"{relative} not present"}
+            continue
+        raw = load_measurement(path)
+        measured, factor = analysis.measured_psf(raw)
+        result[label] = psf_resolution(measured, out / f"resolution_{path.stem}.png", factor)
+        result[label]["native_shape"] = list(raw.shape)
+    return {"level": 0.7, "superpixel_px": sim.SUPERPIXEL_PX, "psfs": result}
 
 
-def _resolution(psf) -> dict:
+def psf_resolution(psf: np.ndarray, picture: Path, binning: int) -> dict:
+    """r₇₀ of one PSF, its picture, and how the PSF was prepared."""
     record = analysis.autocorrelation_resolution(psf)
-    return {"pixels": record.pixels, "superpixels": record.superpixels, "shape": list(psf.shape)}
-
-
-def _load_psf(path: Path) -> np.ndarray:
-    """A measured PSF, background (median) removed; the tutorial's 1200×1600 frame as it is."""
-    if path.suffix == ".npy":
-        psf = np.load(path).astype(np.float64)
-    else:
-        import tifffile
-
-        psf = tifffile.imread(path).astype(np.float64)
-    return np.maximum(psf - np.median(psf), 0)
+    render.save_autocorrelation(picture, sim.autocorrelation(psf), record.pixels)
+    return {"pixels": record.pixels, "superpixels": record.superpixels, "shape": list(psf.shape),
+            "binning": binning, "picture": picture.name}
 
 
 def run_condition(args, out: Path) -> dict:
+    """κ against separation for every design, 2-D and 3-D, every group size, on --size."""
     shape = tuple(args.size)
-    filters = sim.filter_array(shape, sim.band_wavelengths(), args.seed)
-    result, curves = {}, {}
-    for design, build in sim.DESIGNS.items():
-        psf = build(shape, args.seed)
-        for spectral in (False, True):
-            label = f"{design}, {'3-D' if spectral else '2-D'}"
-            cond = analysis.condition_sweep(psf, filters, SEPARATIONS, spectral=spectral, seed=args.seed)
-            below = analysis.separation_below(SEPARATIONS, cond)
-            result[label] = {"separations_px": list(SEPARATIONS), "condition": [_finite(c) for c in cond],
-                             "separation_at_40_px": below,
-                             "separation_at_40_superpixels": None if below is None else below / sim.SUPERPIXEL_PX}
-            curves[label] = (SEPARATIONS, np.minimum(cond, 1e12))
-    render.save_curves(out / "condition.png", "local condition number, 4 points", "separation (px)",
-                       "median cond(A_S)", curves, log_y=True, hline=analysis.COND_LIMIT)
-    return result
+    filters = sim.filter_array(shape, sim.band_wavelengths(args.bands), args.seed)
+    psfs = {name: build(shape, args.seed) for name, build in sim.DESIGNS.items()}
+    separations = tuple(d for d in SEPARATIONS if d * 3 < min(shape) // 2) or (1,)
+    study = analysis.condition_study(psfs, filters, separations, GROUP_SIZES, args.trials, args.seed)
+    render.save_condition_curves(out / "condition.png", separations, study, analysis.COND_LIMIT, sim.SUPERPIXEL_PX)
+    return {"separations_px": list(separations), "limit": analysis.COND_LIMIT, "group_sizes": list(GROUP_SIZES),
+            "trials": args.trials, "shape": list(shape), "bands": args.bands, "average": "geometric mean",
+            "groups": study}
 
 
 def run_designs(args, out: Path) -> dict:
-    designs = analysis.design_comparison(tuple(args.recon_size), args.bands, iters=args.iters, seed=args.seed)
+    designs = analysis.design_comparison(tuple(args.recon_size), args.bands, args.iters, args.seed)
     render.save_design_pictures(out / "designs.png", designs)
-    return {name: {"psnr": row["psnr"], "angle": row["angle"]} for name, row in designs.items()}
+    return {"shape": list(args.recon_size), "bands": args.bands, "iters": args.iters,
+            "designs": {name: {"psnr": row["psnr"], "angle": row["angle"]} for name, row in designs.items()}}
 
 
 def run_spectral(args, out: Path) -> dict:
     result = analysis.spectral_accuracy(tuple(args.recon_size), args.bands, iters=args.iters, seed=args.seed)
-    render.save_curves(out / "spectral.png", "recovered peak wavelength", "true wavelength (nm)", "error (nm)",
-                       {"|found − true|": (result["true_nm"], result["error_nm"])}, hline=5.0)
+    render.save_curves(out / "spectral.png", "recovered peak wavelength of 10 nm lines", "true wavelength (nm)",
+                       "found − true (nm)", {"error": (result["true_nm"], result["error_nm"]),
+                                             "±5 nm (paper)": ([386, 898, np.nan, 386, 898], [5, 5, np.nan, -5, -5])})
     return result
 
 
 def run_twopoint(args, out: Path) -> dict:
-    half = (args.recon_size[0] // 2, args.recon_size[1] // 2)  # two points need only a small field
-    result = analysis.two_point_resolution(half, args.bands, iters=args.iters, seed=args.seed)
-    labels = list(result)
-    render.save_curves(out / "twopoint.png", "two-point resolution (Rayleigh)", "wavelength (nm)",
-                       "smallest resolved separation (px)",
-                       {"resolved at": ([float(k) for k in labels], [np.nan if result[k] is None else result[k]
-                                                                      for k in labels])})
+    result = analysis.two_point_resolution(tuple(args.recon_size), args.bands, iters=args.iters, seed=args.seed)
+    curves = {f"{line:g} nm": (result["separations_px"], result[f"{line:g}"]["dip_ratio"])
+              for line in analysis.TWO_POINT_WAVELENGTHS}
+    render.save_curves(out / "twopoint.png", "two points: dip / weaker peak (resolved below the line)",
+                       "separation (px)", "dip ratio", curves, hline=analysis.RAYLEIGH_DIP)
     return result
 
 
-ANALYSES = ("resolution", "condition", "designs", "spectral", "twopoint")
 RUNNERS = {"resolution": run_resolution, "condition": run_condition, "designs": run_designs,
            "spectral": run_spectral, "twopoint": run_twopoint}
 
 
-# ---- summary --------------------------------------------------------------------------------
+# ---- summary -----------------------------------------------------------------------------------
+def superpixel_text(px) -> str:
+    return f"{px / sim.SUPERPIXEL_PX:.2f} super-pixel ({px} px)"
+
+
+def resolution_rows(result: dict) -> list[tuple[str, str, str]]:
+    rows = []
+    for label, r in result.items():
+        if "skipped" in r:
+            rows.append((f"autocorrelation resolution, {label}", f"skipped: {r['skipped']}", "—"))
+            continue
+        binned = f", binned {r['binning']}×" if r["binning"] > 1 else ""
+        rows.append((f"autocorrelation resolution, {label}{binned}",
+                     f"{r['pixels']:.2f} px = {r['superpixels']:.2f} super-pixel", "~3 px = 0.19 super-pixel"
+                     if label == "simulated caustic" else "—"))
+    return rows
+
+
+def condition_rows(result: dict) -> list[tuple[str, str, str]]:
+    """One row per design and mode: the largest group's separation at κ = 40, the others in brackets."""
+    paper = {"diffuser": "~0.3 super-pixel", "low-NA lens": "~1 super-pixel", "high-NA lens": "—"}
+    rows, groups = [], result["groups"]
+    for design in sim.DESIGNS:
+        for mode in ("2-D", "3-D"):
+            at = {n: groups[f"{design}|{mode}|{n}"]["separation_at_limit_px"] for n in result["group_sizes"]}
+            others = ", ".join(f"n={n}: {'never' if d is None else d}" for n, d in at.items())
+            largest = max(at)
+            headline = superpixel_text(at[largest]) if at[largest] is not None else "never"
+            rows.append((f"separation at κ = 40, {design}, {mode}, {largest} points",
+                         f"{headline} [px: {others}]", paper[design]))
+    return rows
+
+
 def summary_table(results: dict) -> str:
     """Markdown: each figure next to the paper's."""
-    res = results["resolution"]["simulated caustic"]
-    rows = [("autocorrelation resolution, simulated PSF", f"{res['pixels']:.2f} px = {res['superpixels']:.2f} super-pixel",
-             "~3 px = 0.19 super-pixel")]
-    rows += [(f"autocorrelation resolution, {label}", f"{r['pixels']:.2f} px of its sensor", "—")
-             for label, r in results["resolution"].items() if label != "simulated caustic"]
-    for label, r in results["condition"].items():
-        at = r["separation_at_40_superpixels"]
-        rows.append((f"separation at cond 40, {label}", "never ≤ 24 px" if at is None else f"{at:.2f} super-pixel",
-                     "diffuser ~0.3, low-NA lens ~1 super-pixel"))
+    rows = resolution_rows(results["resolution"]["psfs"]) + condition_rows(results["condition"])
     spectral = results["spectral"]
-    rows.append(("peak wavelength error, median / worst",
-                 f"{spectral['median_error_nm']:.1f} / {spectral['worst_error_nm']:.1f} nm", "within 5 nm"))
-    for line, d in results["twopoint"].items():
-        rows.append((f"two-point resolution at {line} nm", "not within 8 px" if d is None else f"{d} px", "—"))
-    for name, r in results["designs"].items():
-        rows.append((f"target reconstruction, {name}", f"{r['psnr']:.2f} dB, {r['angle']:.1f}°", "—"))
-    lines = ["| quantity | clsdcam | paper |", "|---|---|---|"] + [f"| {a} | {b} | {c} |" for a, b, c in rows]
-    return "\n".join(lines)
+    rows.append(("peak-wavelength error, median / worst",
+                 f"{spectral['median_abs_error_nm']:.1f} / {spectral['worst_abs_error_nm']:.1f} nm "
+                 f"({len(spectral['true_nm'])} sources)", "within 5 nm"))
+    twopoint = results["twopoint"]
+    for line in analysis.TWO_POINT_WAVELENGTHS:
+        d = twopoint[f"{line:g}"]["resolved_px"]
+        rows.append((f"two-point resolution at {line:g} nm (Rayleigh)",
+                     f"not within {twopoint['separations_px'][-1]} px" if d is None else f"{d} px", "—"))
+    for name, r in results["designs"]["designs"].items():
+        rows.append((f"target reconstruction, {name}", f"{r['psnr']:.2f} dB PSNR, {r['angle']:.1f}° mean spectral angle",
+                     "—"))
+    return "\n".join(["| quantity | clsdcam | paper |", "|---|---|---|"] + [f"| {a} | {b} | {c} |" for a, b, c in rows])
 
 
-def _write_report(out: Path, table: str):
-    body = "".join(f"<tr>{''.join(f'<td>{cell.strip()}</td>' for cell in line.strip('|').split('|'))}</tr>"
+def write_report(out: Path, table: str, results: dict) -> Path:
+    """report.html: the table, the sizes used, and every picture, on one page."""
+    body = "".join("<tr>" + "".join(f"<td>{cell.strip()}</td>" for cell in line.strip("|").split("|")) + "</tr>"
                    for line in table.splitlines()[2:])
-    images = "".join(f'<h2>{name}</h2><img src="{name}.png" style="max-width:100%">' for name in ANALYSES)
-    html = (f"<html><head><meta charset='utf-8'><title>clsdcam analysis</title></head><body>"
-            f"<h1>clsdcam analysis</h1><table border=1 cellpadding=4><tr><th>quantity</th><th>clsdcam</th>"
-            f"<th>paper</th></tr>{body}</table>{images}</body></html>")
+    pictures = [r["picture"] for r in results["resolution"]["psfs"].values() if "picture" in r]
+    pictures += [f"{name}.png" for name in ANALYSES[1:]]
+    images = "".join(f'<figure><img src="{name}" style="max-width:100%"><figcaption>{name}</figcaption></figure>'
+                     for name in pictures)
+    sizes = {name: {k: results[name].get(k) for k in ("shape", "bands", "iters", "trials") if k in results[name]}
+             for name in ANALYSES[1:]}
+    html = ("<html><head><meta charset='utf-8'><title>clsdcam analysis</title></head><body>"
+            "<h1>clsdcam analysis</h1><table border=1 cellpadding=4><tr><th>quantity</th><th>clsdcam</th>"
+            f"<th>paper</th></tr>{body}</table><p>sizes: {json.dumps(sizes)}</p>{images}</body></html>")
     with atomic_output(out / "report.html") as tmp:
         tmp.write_text(html, encoding="utf-8")
+    return out / "report.html"
 
 
-def _write_json(path: Path, data):
+def write_json(path: Path, data) -> Path:
     with atomic_output(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=1, default=_finite))
+        tmp.write_text(json.dumps(jsonable(data), indent=1, allow_nan=False))
+    return path
 
 
-def _finite(value):
-    """JSON-safe number: inf/NaN become None."""
-    value = float(value)
-    return value if math.isfinite(value) else None
+def jsonable(value):
+    """Plain JSON: containers recursed, NumPy scalars to Python, inf/NaN to None."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    return value.item() if isinstance(value, np.generic) else value
+

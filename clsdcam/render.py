@@ -307,3 +307,27 @@ def save_design_pictures(path, designs: dict) -> Path:
         axes[1, column].set(xlabel="wavelength (nm)", ylabel="y (px)")
         axes[1, column].invert_yaxis()
     return _save(fig, Path(path))
+
+
+def save_condition_curves(path, separations, study: dict, limit: float, superpixel_px: int) -> Path:
+    """Local condition number against separation: one panel per mode (2-D, 3-D), one colour per
+    design, darker and thicker for larger groups; log κ up to 10⁶ (numerically singular groups,
+    κ ≈ 10¹⁶, fall off the top), the ``limit`` dashed, a super-pixel axis on top."""
+    modes = sorted({row["mode"] for row in study.values()})
+    designs = list(dict.fromkeys(row["design"] for row in study.values()))
+    sizes = sorted({row["points"] for row in study.values()})
+    fig = _figure(figsize=(6 * len(modes), 4.5))
+    for ax, mode in zip(fig.subplots(1, len(modes), squeeze=False)[0], modes):
+        for row in (r for r in study.values() if r["mode"] == mode):
+            weight = (sizes.index(row["points"]) + 1) / len(sizes)
+            ax.plot(separations, row["condition"], marker=".", lw=0.6 + 1.4 * weight, alpha=0.35 + 0.65 * weight,
+                    color=SPECTRUM_COLOURS[designs.index(row["design"]) % len(SPECTRUM_COLOURS)],
+                    label=f"{row['design']}, n={row['points']}")
+        ax.axhline(limit, color="grey", linestyle="--", linewidth=1)
+        ax.set(title=f"{mode}: κ(A_S) of n points, geometric mean", xlabel="separation (px)",
+               ylabel="condition number", yscale="log", ylim=(0.8, 1e6))
+        top = ax.secondary_xaxis("top", functions=(lambda d: d / superpixel_px, lambda s: s * superpixel_px))
+        top.set_xlabel("separation (super-pixels)")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=6, ncols=len(designs))
+    return _save(fig, Path(path))
