@@ -1,24 +1,44 @@
 """Many frames: warm-started streams, spread over Dask distributed workers.
 
-The frames are cut into contiguous chunks; a chunk is one task. A worker builds its solver
-(model, PSF transfer function, FFT plans, device buffers, Lipschitz constant) once per
-process and reuses it for every frame of every chunk it gets; inside a chunk each frame
-starts from the previous frame's cube (warm start) and stops by the solver's rule, while a
-reader thread fetches the next frame. Each chunk is written by its worker to its own part
-file ``OUT.h5.parts/chunk-START-STOP.h5``, atomically, so a chunk is either complete or
-absent: re-running the same command computes only the missing chunks, and a chunk that Dask
-re-runs after a worker died replaces its part file whole (no frame is written twice).
-``OUT.h5`` presents ``cubes`` (N,K,H,W) as an HDF5 virtual dataset over the parts, with
-``wavelengths`` and per-frame ``iterations``, ``stop_reason``, ``seconds`` and ``error``.
+Stream. Frames [s, e) are one stream on one solver: frame i starts from the previous frame's
+cube x̂_{i−1} moved by the drift seen between x̂_{i−2} and x̂_{i−1} (the *warm start*, see
+:func:`predict`; none with ``warm_start=False`` or after a failed frame) and stops by the
+solver's rule (``Settings.iters`` / ``Settings.tol``). Frame i+1 is
+read by a reader thread and cube i−1 written by a writer thread while frame i is solved, so
+only about three frames are in memory whatever the stream's length.
+
+Solver cache. A process builds its solver (model, PSF transfer function, FFT plans, device
+buffers, Lipschitz constant) once per (calibration, preprocessing, settings, backend) and
+keeps it in ``_SOLVERS`` for every later chunk: one build per Dask worker, not per frame.
+
+Distribution. The frames still missing are cut into contiguous chunks (a chunk is one Dask
+task, so warm starts hold inside it). The worker writes its chunk into a temporary file and
+renames it to ``OUT.h5.parts/chunk-START-STOP.h5``: a part is whole or absent. A task that
+Dask re-runs after its worker died finds the part already there when the dead worker had
+finished it, and keeps it: no frame is lost or written twice.
+
+Resume. A frame is done when some part covers it; a re-run computes only the others (any
+chunk size, any worker count). ``batch.json`` in the parts folder fingerprints the frames
+and settings, so parts made by a different command are never mixed in (``overwrite``).
+
+Output. ``OUT.h5`` holds ``cubes`` (N,K,H,W), an HDF5 virtual dataset over the parts (NaN
+where a frame failed), ``wavelengths`` and per-frame ``iterations``, ``stop_reason``,
+``seconds``, ``error``; it is rebuilt, atomically, at the end of every run.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import math
+import os
 import pickle
+import re
 import shutil
+import threading
 import time
+import uuid
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +49,10 @@ from .frames import FrameSource
 from .io import atomic_output
 from .solver import Settings, Solver
 
-_SOLVERS: dict = {}   # per process: spec key -> (solver, calibration after preprocessing)
+MAX_CHUNK = 64          # default chunk cap: bounds the work a crash loses and keeps tasks balanced
+_SOLVERS: dict = {}     # per process: spec key -> (solver, raw calibration, wavelengths)
+_PART = re.compile(r"chunk-(\d+)-(\d+)\.h5$")
+_TEXT = ("stop_reason", "error")
 
 
 @dataclass(frozen=True)
@@ -58,44 +81,94 @@ class BatchSummary:
         return 1 if self.failed else 0
 
 
-# ---- one chunk on one worker ---------------------------------------------------------------
-def solve_chunk(spec: BatchSpec, start: int, stop: int, part: str) -> list[dict]:
-    """Reconstruct frames [start, stop) as one warm-started stream and write the part file."""
+# ---- one chunk: a warm-started stream ---------------------------------------------------------
+def solve_chunk(spec: BatchSpec, start: int, stop: int, part: str, report=None) -> list[dict]:
+    """Reconstruct frames [start, stop) into the part file; per-frame records."""
+    return _stream(spec, start, stop, Path(part), report)[0]
+
+
+def _stream(spec: BatchSpec, start: int, stop: int, part: Path, report=None, past=(None, None)):
+    """(records, (x̂_{stop−2}, x̂_{stop−1})): the chunk as one stream, read-ahead and write-behind
+    around each solve; ``past`` = the two cubes before ``start`` (None: unknown or failed)."""
+    import h5py
+
+    if part.exists():  # written by a worker that died before Dask heard of it: keep it
+        return _records(part), (None, None)
     source = FrameSource(spec.frames)
-    records, cubes, x0 = [], None, None
-    with ThreadPoolExecutor(max_workers=1) as reader:
+    records, pending = [], None
+    with atomic_output(part) as tmp, h5py.File(tmp, "w") as out, \
+            ThreadPoolExecutor(1) as reader, ThreadPoolExecutor(1) as writer:
+        out.attrs["writer"] = f"{os.uname().nodename}:{os.getpid()}"
         upcoming = reader.submit(_read, source, start)
         for i in range(start, stop):
             frame, error = upcoming.result()
             if i + 1 < stop:
-                upcoming = reader.submit(_read, source, i + 1)  # read ahead while this frame is solved
+                upcoming = reader.submit(_read, source, i + 1)
             record = {"index": i, "iterations": 0, "stop_reason": "failed", "seconds": 0.0, "error": error or ""}
+            cube, x0 = None, predict(*past) if spec.warm_start else None
             if error is None:
                 try:
-                    cube, record = _solve_frame(spec, frame, x0, record)
-                    cubes = _store(cubes, stop - start, i - start, cube)
-                    x0 = cube if spec.warm_start else None
-                except InputError as exc:
-                    record["error"], x0 = str(exc), None
+                    cube, wavelengths = _solve_frame(spec, frame, x0, record)
+                except Exception as exc:  # noqa: BLE001 - a frame's failure is recorded, the stream goes on
+                    record["error"] = _reason(exc)
+            past = (past[1], cube)
+            if pending is not None:
+                pending.result()
+            if cube is not None:
+                pending = writer.submit(_write_cube, out, i - start, stop - start, cube, wavelengths)
             records.append(record)
-    _write_part(Path(part), records, cubes, stop - start)
-    return records
+            if report is not None:
+                report(i)
+        if pending is not None:
+            pending.result()
+        for key in records[0]:
+            out[key] = np.array([r[key] for r in records], dtype=h5py.string_dtype() if key in _TEXT else None)
+    return records, past
+
+
+def predict(before, previous, min_shift: float = 0.05):
+    """Warm start for frame i from x̂_{i−2} (``before``) and x̂_{i−1} (``previous``), assuming constant velocity.
+
+    The drift d is the peak of the phase correlation of the band sums s = Σ_k x̂_k,
+    c = ℱ⁻¹[ℱs_{i−1}·conj(ℱs_{i−2}) / |ℱs_{i−1}·conj(ℱs_{i−2})|], refined to sub-pixel by a parabola
+    through the peak and its two neighbours on each axis; x0 = x̂_{i−1} shifted by d (bilinear,
+    zero fill, clipped at 0). Without ``before``, or for |d| < ``min_shift`` px, x0 = x̂_{i−1}.
+    """
+    if previous is None or before is None:
+        return previous
+    import scipy.ndimage as ndi
+
+    cross = np.fft.fft2(previous.sum(0)) * np.conj(np.fft.fft2(before.sum(0)))
+    c = np.fft.ifft2(cross / np.maximum(np.abs(cross), 1e-12 * np.abs(cross).max())).real
+    peak = np.unravel_index(np.argmax(c), c.shape)
+    drift = []
+    for axis, n in enumerate(c.shape):
+        lo, mid, hi = (c[tuple((p + (k if a == axis else 0)) % c.shape[a] for a, p in enumerate(peak))] for k in (-1, 0, 1))
+        d = peak[axis] + (0.5 * (lo - hi) / (lo - 2 * mid + hi) if lo - 2 * mid + hi else 0.0)
+        drift.append(d - n if d > n / 2 else d)
+    if np.hypot(*drift) < min_shift:
+        return previous
+    return np.maximum(ndi.shift(previous, (0, *drift), order=1), 0).astype(np.float32)
 
 
 def _read(source: FrameSource, i: int):
     try:
         return source.read(i), None
-    except InputError as exc:
-        return None, str(exc)
+    except Exception as exc:  # noqa: BLE001 - loaders raise many types on damaged files
+        return None, _reason(exc)
+
+
+def _reason(exc: BaseException) -> str:
+    return str(exc) if isinstance(exc, InputError) else f"{type(exc).__name__}: {exc}"
 
 
 def _solve_frame(spec: BatchSpec, frame, x0, record: dict):
-    solver, calibration = _cached_solver(spec, frame)
-    b = _measurement(spec.preprocessing, calibration["raw"], frame)
+    solver, raw, wavelengths = _cached_solver(spec, frame)
+    b = _measurement(spec.preprocessing, raw, frame)
     start = time.perf_counter()
     result = solver.solve(b, x0=x0)
     record.update(iterations=result.iterations, stop_reason=result.stop_reason, seconds=time.perf_counter() - start)
-    return result.cube, record
+    return result.cube, wavelengths
 
 
 def _measurement(options: Preprocessing, raw: Calibration, frame):
@@ -106,88 +179,193 @@ def _measurement(options: Preprocessing, raw: Calibration, frame):
 
 
 def _cached_solver(spec: BatchSpec, frame):
-    """The process's solver for this spec, built on first use (once per worker, not per frame)."""
+    """This process's solver for ``spec``, built on first use (once per worker, not per frame)."""
     key = pickle.dumps((spec.calibration, spec.preprocessing, spec.settings, spec.backend, spec.device, spec.fft))
     if key not in _SOLVERS:
         raw = Calibration.load(spec.calibration)
         calibration, _ = preprocess(raw, frame, spec.preprocessing)
-        solver = Solver(calibration, backend=spec.backend, device=spec.device, settings=spec.settings, fft=spec.fft)
-        _SOLVERS[key] = (solver, {"raw": raw, "wavelengths": calibration.wavelengths})
+        solver = Solver(calibration, backend=spec.backend, device=_worker_device(spec), settings=spec.settings,
+                        fft=spec.fft)
+        _SOLVERS[key] = (solver, raw, np.asarray(calibration.wavelengths))
     return _SOLVERS[key]
 
 
-def _store(cubes, n, j, cube):
-    if cubes is None:
-        cubes = np.full((n,) + cube.shape, np.nan, np.float32)
-    cubes[j] = cube
-    return cubes
+def _worker_device(spec: BatchSpec):
+    """``--device`` if given, else PYOPENCL_CTX if set (the way to pin one device per worker), else,
+    on a worker named by an integer n (LocalCluster's are 0…N−1), GPU number n mod the GPU count."""
+    if spec.device or spec.backend != "opencl" or os.environ.get("PYOPENCL_CTX"):
+        return spec.device
+    try:
+        from distributed import get_worker
+
+        n = int(get_worker().name)
+    except (ImportError, ValueError, TypeError):
+        return None
+    from .backends.cl_devices import _all_devices, import_pyopencl
+
+    gpus = [d for _, d in _all_devices() if d.type & import_pyopencl().device_type.GPU]
+    return gpus[n % len(gpus)] if gpus else None
 
 
-def _write_part(part: Path, records: list[dict], cubes, n: int):
+def _write_cube(out, j: int, n: int, cube: np.ndarray, wavelengths):
+    if "cubes" not in out:
+        out.create_dataset("cubes", (n,) + cube.shape, np.float32, chunks=(1,) + cube.shape, fillvalue=np.nan)
+        out["wavelengths"] = wavelengths
+    out["cubes"][j] = cube
+
+
+def _records(part: Path) -> list[dict]:
     import h5py
 
-    with atomic_output(part) as tmp, h5py.File(tmp, "w") as f:
-        if cubes is not None:
-            f["cubes"] = cubes
-        for key in ("index", "iterations", "seconds"):
-            f[key] = np.array([r[key] for r in records])
-        for key in ("stop_reason", "error"):
-            f[key] = np.array([r[key] for r in records], dtype=h5py.string_dtype())
+    with h5py.File(part, "r") as f:
+        columns = {k: f[k].asstr()[...] if k in _TEXT else f[k][...] for k in ("index", "iterations", "seconds") + _TEXT}
+    return [dict(zip(columns, row)) for row in zip(*columns.values())]
 
 
-# ---- the whole batch ------------------------------------------------------------------------
-def chunk_bounds(n_frames: int, chunk: int) -> list[tuple[int, int]]:
-    return [(s, min(s + chunk, n_frames)) for s in range(0, n_frames, chunk)]
+# ---- the whole batch --------------------------------------------------------------------------
+def chunk_bounds(n_frames: int, chunk: int, first: int = 0) -> list[tuple[int, int]]:
+    return [(s, min(s + chunk, n_frames)) for s in range(first, n_frames, chunk)]
 
 
 def parts_dir(output: Path) -> Path:
+    output = Path(output)
     return output.with_name(output.name + ".parts")
 
 
 def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None = None, chunk: int | None = None,
-              overwrite: bool = False, progress=None) -> BatchSummary:
-    """Reconstruct every frame into ``output``; only chunks without a part file are computed.
+              overwrite: bool = False, progress=None, on_plan=None) -> BatchSummary:
+    """Reconstruct every frame not yet in ``output``'s parts, then (re)build ``output``.
 
-    ``workers`` = 0 (and no scheduler): one in-process stream; otherwise Dask distributed, an
-    embedded LocalCluster of ``workers`` processes or the cluster at ``scheduler``.
-    ``progress(n)`` is called with the number of frames each finished chunk adds.
+    ``workers`` = 0 (and no scheduler): one in-process stream (warm starts carried across its
+    chunks); otherwise Dask distributed, an embedded LocalCluster of ``workers`` processes or
+    the cluster at ``scheduler``. ``chunk`` defaults to ⌈missing / (2·worker threads)⌉, at
+    most MAX_CHUNK. ``on_plan(n_frames, n_missing)`` is called once the missing frames are
+    known, ``progress(k)`` as k more frames are done.
     """
-    output = Path(output)
+    output = Path(output).resolve()
+    spec = replace(spec, frames=tuple(str(Path(p).resolve()) for p in spec.frames),
+                   calibration=str(Path(spec.calibration).resolve()))  # workers may run elsewhere
     n = len(FrameSource(spec.frames))
+    parts = parts_dir(output)
     if overwrite:
-        shutil.rmtree(parts_dir(output), ignore_errors=True)
+        shutil.rmtree(parts, ignore_errors=True)
         output.unlink(missing_ok=True)
-    chunk = chunk or max(1, math.ceil(n / max(2 * workers, 1)))
-    bounds = chunk_bounds(n, chunk)
-    todo = [(s, e) for s, e in bounds if not _part_path(output, s, e).exists()]
-    parts_dir(output).mkdir(parents=True, exist_ok=True)
-    start = time.perf_counter()
-    if todo:
-        runner = _run_serial if workers == 0 and scheduler is None else _run_dask
-        runner(spec, output, todo, workers, scheduler, progress or (lambda k: None))
-    summary = _assemble(spec, output, bounds, n)
-    summary.computed_frames = sum(e - s for s, e in todo)
-    summary.seconds = time.perf_counter() - start
+    _claim(parts, spec, n)
+    missing = _missing(parts, n)
+    if on_plan is not None:
+        on_plan(n, len(missing))
+    try:
+        progress = _Progress(progress)
+        start = time.perf_counter()
+        lost = {}
+        if missing and workers == 0 and scheduler is None:
+            _run_serial(spec, parts, _chunks(missing, chunk, 1), progress)
+        elif missing:
+            with _client(workers, scheduler) as client:
+                slots = sum(client.nthreads().values()) or max(workers, 1)
+                lost = _run_dask(client, spec, parts, _chunks(missing, chunk, slots), progress)
+    except BaseException:
+        if not _parts(parts):  # nothing computed (e.g. no scheduler): leave no trace
+            shutil.rmtree(parts, ignore_errors=True)
+        raise
+    summary = _assemble(output, n, lost)
+    summary.computed_frames, summary.seconds = len(missing), time.perf_counter() - start
     return summary
 
 
-def _part_path(output: Path, start: int, stop: int) -> Path:
-    return parts_dir(output) / f"chunk-{start:06d}-{stop:06d}.h5"
+def _claim(parts: Path, spec: BatchSpec, n: int):
+    """Fingerprint the batch in ``parts/batch.json``; InputError if the parts belong to another one."""
+    what = (spec.frames, spec.calibration, spec.preprocessing, spec.settings, spec.warm_start, n)
+    stamp = {"fingerprint": hashlib.sha256(pickle.dumps(what)).hexdigest(), "frames": n,
+             "settings": repr(spec.settings), "warm_start": spec.warm_start}
+    path = parts / "batch.json"
+    if path.exists():
+        if json.loads(path.read_text())["fingerprint"] != stamp["fingerprint"]:
+            raise InputError(f"{parts} holds frames of another batch (other frames, calibration or settings); "
+                             "use --overwrite to start again")
+        return
+    parts.mkdir(parents=True, exist_ok=True)
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(stamp, indent=1))
 
 
-def _run_serial(spec, output, todo, workers, scheduler, progress):
-    for s, e in todo:
-        progress(len(solve_chunk(spec, s, e, str(_part_path(output, s, e)))))
+def _parts(parts: Path) -> list[tuple[int, int, Path]]:
+    """The finished parts, as (start, stop, path), by start."""
+    found = (( _PART.fullmatch(p.name), p) for p in parts.glob("chunk-*.h5"))
+    return sorted((int(m[1]), int(m[2]), p) for m, p in found if m)
 
 
-def _run_dask(spec, output, todo, workers, scheduler, progress):
-    from dask.distributed import as_completed
+def _missing(parts: Path, n: int) -> list[int]:
+    done = np.zeros(n, bool)
+    for s, e, _ in _parts(parts):
+        done[s:e] = True
+    return [int(i) for i in np.flatnonzero(~done)]
 
-    with _client(workers, scheduler) as client:
-        futures = [client.submit(solve_chunk, spec, s, e, str(_part_path(output, s, e)), pure=False,
-                                 key=f"clsdcam-chunk-{s}-{e}-{time.time_ns()}") for s, e in todo]
-        for future in as_completed(futures):
-            progress(len(future.result()))
+
+def _chunks(missing: list[int], chunk: int | None, slots: int) -> list[tuple[int, int]]:
+    """Contiguous runs of the missing frames, cut into chunks of ``chunk`` frames."""
+    chunk = chunk or min(MAX_CHUNK, max(1, math.ceil(len(missing) / (2 * slots))))
+    runs, first = [], missing[0]
+    for a, b in zip(missing, missing[1:] + [None]):
+        if b != a + 1:
+            runs += chunk_bounds(a + 1, chunk, first)
+            first = b
+    return runs
+
+
+def _part_path(parts: Path, start: int, stop: int) -> Path:
+    return parts / f"chunk-{start:06d}-{stop:06d}.h5"
+
+
+class _Progress:
+    """Counts each frame once (events can repeat when Dask re-runs a chunk) and reports it."""
+
+    def __init__(self, callback):
+        self.callback, self.seen, self.lock = callback, set(), threading.Lock()
+
+    def __call__(self, indices):
+        with self.lock:
+            new = set(indices) - self.seen
+            self.seen |= new
+        if new and self.callback is not None:
+            self.callback(len(new))
+
+
+def _run_serial(spec, parts, bounds, progress):
+    past, last = (None, None), None
+    for s, e in bounds:
+        _, past = _stream(spec, s, e, _part_path(parts, s, e), lambda i: progress([i]), past if s == last else (None, None))
+        last = e
+
+
+def _dask_chunk(spec, start, stop, part, topic):
+    """solve_chunk on a Dask worker, announcing each finished frame on the event ``topic``."""
+    from distributed import get_worker
+
+    worker = get_worker()
+    return solve_chunk(spec, start, stop, part, lambda i: worker.log_event(topic, i))
+
+
+def _run_dask(client, spec, parts, bounds, progress) -> dict[int, str]:
+    """Run the chunks as tasks; {frame: reason} for the frames of chunks that failed as a whole
+    (e.g. their worker died more often than Dask's allowed-failures): a re-run retries them."""
+    from distributed import as_completed
+
+    topic = f"clsdcam-frames-{uuid.uuid4().hex}"
+    client.subscribe_topic(topic, lambda event: progress([event[1]]))
+    futures = {client.submit(_dask_chunk, spec, s, e, str(_part_path(parts, s, e)), topic, pure=False,
+                             key=f"clsdcam-chunk-{s}-{e}-{uuid.uuid4().hex}"): (s, e) for s, e in bounds}
+    lost = {}
+    try:
+        for future in as_completed(futures, loop=client.loop):
+            if future.status == "finished":
+                progress(r["index"] for r in future.result())
+            else:
+                lost.update(dict.fromkeys(range(*futures[future]), f"chunk failed: {_reason(future.exception())}"))
+    finally:
+        client.unsubscribe_topic(topic)
+        client.cancel(list(futures))
+    return lost
 
 
 class _client:
@@ -199,13 +377,16 @@ class _client:
     def __enter__(self):
         import logging
 
-        from dask.distributed import Client, LocalCluster
+        from distributed import Client, LocalCluster
 
         if self.scheduler:
-            self.client = Client(self.scheduler, timeout=30)
+            try:
+                self.client = Client(self.scheduler, timeout=30)
+            except OSError as exc:
+                raise InputError(f"--scheduler {self.scheduler}: cannot connect ({exc})") from None
         else:
             self.cluster = LocalCluster(n_workers=max(self.workers, 1), threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.ERROR)
+                                        dashboard_address=":0", silence_logs=logging.ERROR)
             self.client = Client(self.cluster)
         return self.client
 
@@ -215,38 +396,31 @@ class _client:
             self.cluster.close()
 
 
-def _assemble(spec: BatchSpec, output: Path, bounds, n: int) -> BatchSummary:
-    """OUT.h5: a virtual ``cubes`` over the parts (NaN where a frame failed) and per-frame records."""
+def _assemble(output: Path, n: int, lost: dict[int, str]) -> BatchSummary:
+    """OUT.h5: a virtual ``cubes`` over the parts (NaN where a frame failed or is ``lost``) and per-frame records."""
     import h5py
 
     per_frame = {"iterations": np.zeros(n, np.int64), "seconds": np.zeros(n), "stop_reason": [""] * n, "error": [""] * n}
-    sources, shape = [], None
-    for s, e in bounds:
-        with h5py.File(_part_path(output, s, e), "r") as part:
+    layout, wavelengths = None, None
+    for s, e, path in _parts(parts_dir(output)):
+        for r in _records(path):
             for key in per_frame:
-                values = part[key].asstr()[...] if key in ("stop_reason", "error") else part[key][...]
-                for j, value in enumerate(values):
-                    per_frame[key][s + j] = value
-            if "cubes" in part:
-                shape = part["cubes"].shape[1:]
-                sources.append((s, e, h5py.VirtualSource(f"{parts_dir(output).name}/{_part_path(output, s, e).name}",
-                                                         "cubes", shape=part["cubes"].shape)))
+                per_frame[key][r["index"]] = r[key]
+        with h5py.File(path, "r") as part:
+            if "cubes" not in part:
+                continue
+            shape, wavelengths = part["cubes"].shape, part["wavelengths"][...]
+            layout = layout or h5py.VirtualLayout(shape=(n,) + shape[1:], dtype=np.float32)
+            layout[s:e] = h5py.VirtualSource(f"{path.parent.name}/{path.name}", "cubes", shape=shape)
+    for i, reason in lost.items():
+        per_frame["stop_reason"][i], per_frame["error"][i] = "failed", reason
     failed = [(i, per_frame["error"][i]) for i in range(n) if per_frame["error"][i]]
-    if shape is None:
+    if layout is None:
         raise InputError(f"no frame of {n} could be reconstructed; first error: {failed[0][1]}")
-    layout = h5py.VirtualLayout(shape=(n,) + shape, dtype=np.float32)
-    for s, e, source in sources:
-        layout[s:e] = source
     with atomic_output(output) as tmp, h5py.File(tmp, "w") as f:
         f.create_virtual_dataset("cubes", layout, fillvalue=np.nan)
-        f["wavelengths"] = _cached_wavelengths(spec)
+        f["wavelengths"] = wavelengths
         for key, values in per_frame.items():
-            f[key] = np.array(values, dtype=h5py.string_dtype()) if key in ("stop_reason", "error") else values
-        f.attrs["calibration"] = spec.calibration
-        f.attrs["warm_start"] = spec.warm_start
+            f[key] = np.array(values, dtype=h5py.string_dtype() if key in _TEXT else None)
+        f.attrs.update(json.loads((parts_dir(output) / "batch.json").read_text()))
     return BatchSummary(n_frames=n, computed_frames=0, failed=failed)
-
-
-def _cached_wavelengths(spec: BatchSpec) -> np.ndarray:
-    wavelengths = Calibration.load(spec.calibration).wavelengths
-    return wavelengths[:-1] if spec.preprocessing.drop_last_band else wavelengths

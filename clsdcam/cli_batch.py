@@ -17,9 +17,9 @@ def add_parser(subparsers):
     where.add_argument("--workers", type=int, default=1,
                        help="worker processes of an embedded Dask LocalCluster (0: one in-process stream; default 1)")
     where.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
-    p.add_argument("--chunk", type=int, default=None, help="frames per task (default: N / (2·workers))")
+    p.add_argument("--chunk", type=int, default=None, help="frames per task (default: missing frames / (2·workers), at most 64)")
     p.add_argument("--no-warm-start", action="store_true", help="start every frame from zero")
-    p.add_argument("--overwrite", action="store_true", help="recompute everything (default: only missing chunks)")
+    p.add_argument("--overwrite", action="store_true", help="recompute everything (default: only the missing frames)")
     add_solver_options(p)
     add_preprocessing_options(p)
 
@@ -36,13 +36,14 @@ def run(args) -> int:
     spec = BatchSpec(frames=tuple(args.frames), calibration=args.calibration, preprocessing=preprocessing(args),
                      settings=settings(args), backend=args.backend, device=args.device, fft=args.fft,
                      warm_start=not args.no_warm_start)
-    from .frames import FrameSource
-
-    bar = None if args.quiet else _bar(len(FrameSource(spec.frames)))
-    summary = run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,
-                        overwrite=args.overwrite, progress=None if bar is None else bar.update)
-    if bar is not None:
-        bar.close()
+    bars = []
+    try:
+        summary = run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,
+                            overwrite=args.overwrite, progress=lambda k: bars and bars[0].update(k),
+                            on_plan=None if args.quiet else lambda n, missing: bars.append(_bar(n, n - missing)))
+    finally:
+        for bar in bars:
+            bar.close()
     rate = summary.computed_frames / summary.seconds if summary.seconds else 0.0
     print(f"wrote {args.output}: {summary.n_frames} frames ({summary.computed_frames} computed now, "
           f"{rate:.2f} frames/s), {len(summary.failed)} failed")
@@ -51,7 +52,8 @@ def run(args) -> int:
     return summary.exit_code
 
 
-def _bar(total: int):
+def _bar(total: int, done: int):
+    """One bar over all frames (those done by an earlier run already counted); tqdm shows frames/s and ETA."""
     from tqdm import tqdm
 
-    return tqdm(total=total, unit="frame", file=sys.stderr, dynamic_ncols=True)
+    return tqdm(total=total, initial=done, unit="frame", file=sys.stderr, dynamic_ncols=True, smoothing=0.1)

@@ -45,7 +45,7 @@ def cubes(path):
 
 
 def local_cluster():
-    return LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+    return LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                         silence_logs=logging.CRITICAL)
 
 
@@ -169,14 +169,14 @@ def test_external_scheduler_and_worker(video, tmp_path):
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     scheduler = subprocess.Popen(dask + ["scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1],
                                          "--no-dashboard"], **quiet)
-    worker = subprocess.Popen(dask + ["worker", address, "--nthreads", "1", "--no-dashboard",
-                                      "--listen-address", "tcp://127.0.0.1:0"], **quiet)
+    worker = subprocess.Popen(dask + ["worker", address, "--nthreads", "1", "--no-dashboard"], **quiet)
     try:
         with Client(address, timeout=60) as client:
             client.wait_for_workers(1, timeout=60)
-            code = main(["batch", str(video["frames"]), "--calibration", str(video["calibration"]), "-o",
-                         str(tmp_path / "out.h5"), "--scheduler", address, "--iters", "20", "--quiet"])
-            assert code == 0 and np.isfinite(cubes(tmp_path / "out.h5")[0]).all()
+        code = main(["batch", str(video["frames"]), "--calibration", str(video["calibration"]), "-o",
+                     str(tmp_path / "out.h5"), "--scheduler", address, "--iters", "20", "--quiet"])
+        assert code == 0 and np.isfinite(cubes(tmp_path / "out.h5")[0]).all()
+        with Client(address, timeout=60) as client:
             client.shutdown()
         assert scheduler.wait(timeout=30) == 0 and worker.wait(timeout=30) == 0
     finally:
@@ -210,3 +210,12 @@ def test_simulate_frames_writes_a_video(tmp_path):
         truth = f["cubes"][...]
     assert frames.shape == (3, 16, 20) and truth.shape == (3, 2, 16, 20)
     assert not np.allclose(truth[0], truth[2])  # the scene moves
+
+
+def test_warm_start_follows_a_constant_drift():
+    """predict(x̂(t−2), x̂(t−1)) moves x̂(t−1) by the drift between them (here 2 px right, 1 px down)."""
+    y, x = np.mgrid[:32, :40]
+    blob = lambda cy, cx: np.stack([np.exp(-((y - cy) ** 2 + (x - cx) ** 2) / 8.0)] * 3).astype(np.float32)
+    np.testing.assert_allclose(batch.predict(blob(10, 12), blob(11, 14)), blob(12, 16), atol=0.02)
+    assert batch.predict(None, blob(11, 14)) is not None and batch.predict(blob(5, 5), blob(5, 5)) is not None
+    np.testing.assert_array_equal(batch.predict(blob(5, 5), blob(5, 5)), blob(5, 5))
