@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .io import MAX_DATASET_BYTES, as_real_array, atomic_output, checked_read, existing_file, first_line, require_finite
+from .errors import InputError, shape_text
+from .io import MAX_DATASET_BYTES, as_real_array, atomic_output, existing_file, first_line, read_dataset, require_finite
 
 REFERENCE_CROP = (100, 420, 80, 540)  # rows 100:420, cols 80:540 of the 494×659 raw frame
 DEFECT_HALF = 2                        # the reference zeroes [i−2:i+2, j−2:j+2]
@@ -109,20 +109,12 @@ def _read_hdf5_calibration(path: Path):
     try:
         with h5py.File(path, "r") as f:
             if "filters" in f:
-                return tuple(_dataset(path, f, key) for key in ("psf", "filters", "wavelengths"))
-            contents = {key: _dataset(path, f, key).T for key in ("psf", "mask", "wavs") if key in f}
+                return tuple(read_dataset(f, key, f"calibration {path}") for key in ("psf", "filters", "wavelengths"))
+            contents = {key: read_dataset(f, key, f"calibration {path}").T for key in ("psf", "mask", "wavs") if key in f}
             contents["__keys__"] = list(f.keys())
     except (OSError, ValueError, TypeError, KeyError, RuntimeError, MemoryError) as exc:
         raise InputError(f"calibration {path}: neither a MATLAB nor an HDF5 file ({first_line(exc)})") from None
     return _paper_layout(path, contents)
-
-
-def _dataset(path, f, key):
-    import h5py
-
-    if key not in f or not isinstance(f[key], h5py.Dataset):
-        raise InputError(f"calibration {path}: no dataset {key!r} (found: {', '.join(sorted(f.keys()))})")
-    return checked_read(f[key], f"calibration {path}")
 
 
 def _paper_layout(path, contents: dict):
@@ -181,7 +173,7 @@ def preprocess(calibration: Calibration, measurement: np.ndarray, options: Prepr
         window = _crop_window(options.crop, calibration, b)
         psf, filters, b = psf[window], filters[(slice(None),) + window], b[window]
     elif b.shape != psf.shape:
-        raise InputError(f"measurement {_shape(b.shape)} does not match calibration {_shape(psf.shape)} "
+        raise InputError(f"measurement {shape_text(b.shape)} does not match calibration {shape_text(psf.shape)} "
                          f"({calibration.source}); give --crop Y0:Y1,X0:X1")
     wavelengths = calibration.wavelengths
     if options.drop_last_band:
@@ -203,7 +195,7 @@ def _crop_window(crop, calibration: Calibration, b: np.ndarray) -> tuple[slice, 
     y0, y1, x0, x1 = crop
     for name, shape in (("calibration", calibration.shape), ("measurement", b.shape)):
         if y1 > shape[0] or x1 > shape[1]:
-            raise InputError(f"--crop {y0}:{y1},{x0}:{x1} lies outside the {name} {_shape(shape)}")
+            raise InputError(f"--crop {y0}:{y1},{x0}:{x1} lies outside the {name} {shape_text(shape)}")
     return slice(y0, y1), slice(x0, x1)
 
 
@@ -228,8 +220,8 @@ def excluded_pixels(b: np.ndarray, options: Preprocessing) -> np.ndarray:
         excluded |= b >= options.saturation
     if options.dead_pixels is not None:
         if options.dead_pixels.shape != b.shape:
-            raise InputError(f"dead-pixel mask {_shape(options.dead_pixels.shape)} does not match the "
-                             f"measurement {_shape(b.shape)} (after cropping)")
+            raise InputError(f"dead-pixel mask {shape_text(options.dead_pixels.shape)} does not match the "
+                             f"measurement {shape_text(b.shape)} (after cropping)")
         excluded |= options.dead_pixels
     return excluded
 
@@ -243,6 +235,3 @@ def exclude_pixels(filters: np.ndarray, b: np.ndarray, excluded: np.ndarray):
         raise InputError("every pixel is excluded (saturated or dead): nothing left to reconstruct from")
     return np.where(excluded, 0.0, filters), np.where(excluded, 0.0, b)
 
-
-def _shape(shape) -> str:
-    return "×".join(str(n) for n in shape)

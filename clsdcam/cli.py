@@ -10,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from .errors import InputError
+from .errors import InputError, shape_text
 
 
 class _Parser(argparse.ArgumentParser):
@@ -120,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("devices", help="list OpenCL platforms and devices (memory, compute units, fp64)")
     from . import cli_analyze, cli_batch
 
-    cli_analyze.add_parser(sub, _size)
+    cli_analyze.add_parser(sub)
     cli_batch.add_parser(sub)
     return parser
 
@@ -144,7 +144,7 @@ def cmd_reconstruct(args) -> int:
     truth = _read_truth(args.truth) if args.truth else None
     expected = (calibration.n_bands,) + measurement.shape
     if truth is not None and truth.shape != expected:
-        raise InputError(f"--truth {args.truth}: cube {_describe(truth.shape)} does not match {_describe(expected)}")
+        raise InputError(f"--truth {args.truth}: cube {shape_text(truth.shape)} does not match {shape_text(expected)}")
     result = _solve(args, calibration, measurement)
     code = _write(args, result, truth)
     if truth is not None and code == 0:
@@ -159,7 +159,7 @@ def cmd_simulate(args) -> int:
         return _simulate_video(args)
     sim = simulate(**_simulation_kwargs(args))
     paths = write_simulation(args.outdir, sim)
-    print(f"simulated scene {sim.scene!r} ({_describe(sim.truth.shape)}): " +
+    print(f"simulated scene {sim.scene!r} ({shape_text(sim.truth.shape)}): " +
           ", ".join(str(p) for p in paths.values()))
     return 0
 
@@ -179,7 +179,7 @@ def cmd_demo(args) -> int:
     start = time.perf_counter()
     sim = simulate(**_simulation_kwargs(args))
     write_simulation(args.outdir, sim)
-    print(f"simulated scene {sim.scene!r}, {_describe(sim.truth.shape)}, in {time.perf_counter() - start:.1f} s")
+    print(f"simulated scene {sim.scene!r}, {shape_text(sim.truth.shape)}, in {time.perf_counter() - start:.1f} s")
     args.output = str(Path(args.outdir) / "cube.h5")
     args.png = args.png or str(Path(args.outdir) / "cube")
     result = _solve(args, sim.calibration, sim.measurement, snapshots=args.report_at)
@@ -250,7 +250,7 @@ def _solve(args, calibration, measurement, snapshots=()):
     solver = Solver(calibration, backend=args.backend, device=args.device, settings=settings(args), fft=args.fft)
     if not args.quiet:
         print(f"backend {solver.backend.name} on {solver.backend.device_name} (FFT: {solver.backend.fft_engine}); field "
-              f"{_describe(solver.model.cube_shape)}; L = {solver.lipschitz:.4g}", file=sys.stderr)
+              f"{shape_text(solver.model.cube_shape)}; L = {solver.lipschitz:.4g}", file=sys.stderr)
     with _progress_bar(args.iters, args.quiet) as progress:
         result = solver.solve(measurement, progress=progress, snapshots=snapshots)
     if result.stop_reason == "interrupted" and not args.save_on_interrupt:
@@ -307,7 +307,7 @@ def _tqdm(total: int):
 def _report(args, result, output: Path):
     seconds = result.history[-1]["seconds"] if result.history else 0.0
     per_iteration = seconds / max(result.iterations, 1)
-    print(f"wrote {output}: cube {_describe(result.cube.shape)}, {result.iterations} iterations "
+    print(f"wrote {output}: cube {shape_text(result.cube.shape)}, {result.iterations} iterations "
           f"(stopped: {result.stop_reason}) in {seconds:.1f} s ({per_iteration:.3f} s/iteration) "
           f"on {result.attrs['backend']} [{result.attrs['device']}]")
 
@@ -316,7 +316,7 @@ def _print_accuracy(cube, truth, label=""):
     from .metrics import psnr, spectral_angle
 
     if truth.shape != cube.shape:
-        raise InputError(f"--truth cube {_describe(truth.shape)} does not match the result {_describe(cube.shape)}")
+        raise InputError(f"--truth cube {shape_text(truth.shape)} does not match the result {shape_text(cube.shape)}")
     print(f"{label}PSNR {psnr(cube, truth):.2f} dB, mean spectral angle {spectral_angle(cube, truth):.2f}°")
 
 
@@ -325,9 +325,6 @@ def _read_truth(path):
 
     return read_cube(path)["cube"]
 
-
-def _describe(shape) -> str:
-    return "×".join(str(n) for n in shape)
 
 
 def cmd_batch(args) -> int:

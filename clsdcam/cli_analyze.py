@@ -54,15 +54,14 @@ def _at_least(low: int):
     return parse
 
 
-def add_parser(subparsers, size_type=None) -> argparse.ArgumentParser:
+def add_parser(subparsers) -> argparse.ArgumentParser:
     """The ``analyze`` subcommand with one sub-choice per analysis (dest ``what``), each taking OUTDIR
-    and the size options; ``size_type`` parses HxW (default :func:`parse_size`)."""
-    size_type = size_type or parse_size
+    and the size options (HxW, parsed by :func:`parse_size`)."""
     options = argparse.ArgumentParser(add_help=False)
     options.add_argument("outdir", help="folder for the JSON, PNG (and report) files")
-    options.add_argument("--size", type=size_type, default=sim.DEFAULT_SHAPE, metavar="HxW",
+    options.add_argument("--size", type=parse_size, default=sim.DEFAULT_SHAPE, metavar="HxW",
                          help="sensor of the PSF and condition-number analyses (default 320x448)")
-    options.add_argument("--recon-size", type=size_type, default=(64, 96), metavar="HxW",
+    options.add_argument("--recon-size", type=parse_size, default=(64, 96), metavar="HxW",
                          help="sensor of the reconstruction analyses (default 64x96)")
     options.add_argument("--bands", type=_at_least(2), default=64,
                          help="bands of the filter array and the reconstructions (default 64)")

@@ -7,3 +7,8 @@ class InputError(ValueError):
     The message names the file or parameter and the problem in one line; the
     CLI prints it without a traceback and exits with code 2.
     """
+
+
+def shape_text(shape) -> str:
+    """A shape as messages write it: (64, 320, 448) -> "64×320×448"."""
+    return "×".join(str(n) for n in shape)

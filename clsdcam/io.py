@@ -76,15 +76,19 @@ def read_h5_dataset(path: Path, key: str, what: str) -> np.ndarray:
 
     try:
         with h5py.File(path, "r") as f:
-            if key not in f or not isinstance(f[key], h5py.Dataset):
-                raise InputError(f"{what} {path}: no dataset {key!r} (found: {', '.join(sorted(f.keys())) or 'none'})")
-            return checked_read(f[key], f"{what} {path}")
+            return read_dataset(f, key, f"{what} {path}")
     except (OSError, ValueError, KeyError, TypeError, RuntimeError, MemoryError) as exc:
         raise InputError(f"{what} {path}: not a readable HDF5 file ({first_line(exc)})") from None
 
 
-def checked_read(dataset, name: str) -> np.ndarray:
-    """Read an HDF5 dataset after checking that its declared size is sane."""
+def read_dataset(f, key: str, name: str) -> np.ndarray:
+    """Dataset ``key`` of an open HDF5 file, after checking that it exists and that its declared
+    size is sane; InputError prefixed with ``name`` otherwise."""
+    import h5py
+
+    if key not in f or not isinstance(f[key], h5py.Dataset):
+        raise InputError(f"{name}: no dataset {key!r} (found: {', '.join(sorted(f.keys())) or 'none'})")
+    dataset = f[key]
     nbytes = dataset.size * dataset.dtype.itemsize
     if nbytes > MAX_DATASET_BYTES:
         raise InputError(f"{name}: dataset {dataset.name} declares {nbytes / 2**30:.1f} GiB, more than the "

@@ -18,7 +18,7 @@ import numpy as np
 
 from . import __version__
 from .backends import get_backend
-from .errors import InputError
+from .errors import InputError, shape_text
 from .io import require_finite
 from .fista import fista
 from .model import ForwardModel, default_field_shape
@@ -155,8 +155,8 @@ class Solver:
         if x0.shape == self.model.cube_shape:
             return self.backend.to_device(x0)
         if x0.shape != self._cube_window_shape():
-            raise InputError(f"warm start {_shape(x0.shape)}: expected {_shape(self._cube_window_shape())} "
-                             f"or the field {_shape(self.model.cube_shape)}")
+            raise InputError(f"warm start {shape_text(x0.shape)}: expected {shape_text(self._cube_window_shape())} "
+                             f"or the field {shape_text(self.model.cube_shape)}")
         return self.model.embed(x0)
 
     def _cube_window_shape(self):
@@ -165,7 +165,7 @@ class Solver:
     def _checked(self, measurement) -> np.ndarray:
         b = np.asarray(measurement, dtype=np.float64)
         if b.shape != self.model.sensor_shape:
-            raise InputError(f"measurement {_shape(b.shape)} does not match calibration {_shape(self.model.sensor_shape)}")
+            raise InputError(f"measurement {shape_text(b.shape)} does not match calibration {shape_text(self.model.sensor_shape)}")
         return require_finite(b, "measurement")
 
     def _regularizer(self) -> Regularizer:
@@ -220,9 +220,6 @@ class Solver:
         return Result(cube=cube, wavelengths=np.asarray(self.calibration.wavelengths), history=history,
                       attrs=attrs, full_field=full)
 
-
-def _shape(shape) -> str:
-    return "x".join(str(n) for n in shape)
 
 
 def reconstruct(measurement, calibration, backend="numpy", device: str | None = None, x0=None,

@@ -139,21 +139,15 @@ class OpenCLBackend:
     # ---- vectors ------------------------------------------------------------------------
     def scale(self, a, x, out=None):
         """a·x."""
-        out = self._out(out, x.shape, x.dtype)
-        self.kernels.grid1("scale", x.size, out, x, self._real(a), np.int64(x.size))
-        return out
+        return self._map("scale", x, out, x, self._real(a))
 
     def axpy(self, a, x, y, out=None):
         """a·x + y (out may alias x or y)."""
-        out = self._out(out, x.shape, x.dtype)
-        self.kernels.grid1("axpy", x.size, out, self._real(a), x, y, np.int64(x.size))
-        return out
+        return self._map("axpy", x, out, self._real(a), x, y)
 
     def extrapolate(self, x_new, x_old, beta, out=None):
         """FISTA momentum: x⁺ + β(x⁺ − x)  (out may alias x_old)."""
-        out = self._out(out, x_new.shape, x_new.dtype)
-        self.kernels.grid1("extrapolate", x_new.size, out, x_new, x_old, self._real(beta), np.int64(x_new.size))
-        return out
+        return self._map("extrapolate", x_new, out, x_new, x_old, self._real(beta))
 
     def vdot(self, x, y) -> float:
         """⟨x, y⟩, per-group partial sums in float64 (Kahan float32 without fp64), finished on the host."""
@@ -165,15 +159,11 @@ class OpenCLBackend:
 
     def nonneg(self, x, out=None):
         """max(x, 0)."""
-        out = self._out(out, x.shape, x.dtype)
-        self.kernels.grid1("nonneg", x.size, out, x, np.int64(x.size))
-        return out
+        return self._map("nonneg", x, out, x)
 
     def soft(self, x, t, out=None):
         """Soft threshold sign(x)·max(|x| − t, 0)."""
-        out = self._out(out, x.shape, x.dtype)
-        self.kernels.grid1("soft", x.size, out, x, self._real(t), np.int64(x.size))
-        return out
+        return self._map("soft", x, out, x, self._real(t))
 
     def haar_tv(self, x, tau, weights, out=None):
         """One parallel-proximal Haar step for weighted anisotropic TV (see NumpyBackend.haar_tv):
@@ -223,6 +213,12 @@ class OpenCLBackend:
         return self.copy(target, out) if target is not out and out is not None else target
 
     # ---- helpers ------------------------------------------------------------------------
+    def _map(self, name: str, like, out, *args):
+        """An elementwise kernel of fista.cl/prox.cl over ``like``'s elements: name(out, *args, n)."""
+        out = self._out(out, like.shape, like.dtype)
+        self.kernels.grid1(name, like.size, out, *args, np.int64(like.size))
+        return out
+
     def _out(self, out, shape, dtype):
         """``out`` after checking its shape and dtype, or a new array."""
         if out is None:
