@@ -113,9 +113,9 @@ def _iterate(be, gradient_step, prox, s: _State, restart: bool) -> dict:
     data = gradient_step(s.y, s.z, s.step)
     s.x, s.x_prev = s.x_prev, s.x
     prox(s.z, s.x, s.step)
-    be.axpy(-1.0, s.x_prev, s.x, out=s.z)                  # z = x⁺ − x
-    change = _ratio(be.vdot(s.z, s.z), be.vdot(s.x, s.x))
-    uphill = restart and be.vdot(s.y, s.z) - be.vdot(s.x, s.z) > 0  # ⟨y − x⁺, x⁺ − x⟩ > 0
+    step_sq, norm_sq, slope = be.fista_stats(s.x, s.x_prev, s.y)   # ‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩
+    change = _ratio(step_sq, norm_sq)
+    uphill = restart and slope > 0
     if uphill:
         s.t = 1.0
     t_next = next_momentum(s.t)

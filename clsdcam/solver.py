@@ -182,8 +182,7 @@ class Solver:
         be = self.backend
         self._residual(y)
         data = 0.5 * be.vdot(self._r, self._r)
-        self.model.adjoint(self._r, out=out)
-        be.axpy(-step, out, y, out=out)
+        self.model.adjoint(self._r, out=out, y=y, step=step)
         return data
 
     def _residual(self, x):

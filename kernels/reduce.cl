@@ -39,6 +39,14 @@ inline void store_partial(__global ACC *partial, ACC total)
     if (get_local_id(0) == 0) partial[get_group_id(0)] = total;
 }
 
+/* Output j of a reduction with several: partial holds G values per output, output j at [j·G, (j+1)·G).
+ * The barrier lets the next group_reduce reuse the scratch. */
+inline void store_partial_of(__global ACC *partial, int j, ACC total)
+{
+    if (get_local_id(0) == 0) partial[(size_t)j * get_num_groups(0) + get_group_id(0)] = total;
+    barrier(CLK_LOCAL_MEM_FENCE);
+}
+
 /* vdot: partial sums of Σ_i x_i·y_i (products formed in ACC). x, y: n elements. */
 __kernel void vdot(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
                    __global const REAL *x, __global const REAL *y)
@@ -72,4 +80,21 @@ __kernel void tv_norm(__global ACC *partial, __local ACC *scratch, long n, long 
     FOR_TERMS(i)
         acc_add(&s, &c, tv_term(x, i, K, H, W, w0, w1, w2));
     store_partial(partial, group_reduce(s - c, scratch, 0));
+}
+
+/* fista_stats: partial sums of (d², x⁺², (y − x⁺)·d) with d = x⁺ − x, the differences in REAL (as NumPy),
+ * the products in ACC: FISTA's ‖x⁺ − x‖², ‖x⁺‖² and restart test ⟨y − x⁺, x⁺ − x⟩ in one pass. */
+__kernel void fista_stats(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
+                          __global const REAL *xnew, __global const REAL *xold, __global const REAL *y)
+{
+    ACC s0 = 0, c0 = 0, s1 = 0, c1 = 0, s2 = 0, c2 = 0;
+    FOR_TERMS(i) {
+        REAL a = xnew[i], d = a - xold[i], back = y[i] - a;
+        acc_add(&s0, &c0, (ACC)d * (ACC)d);
+        acc_add(&s1, &c1, (ACC)a * (ACC)a);
+        acc_add(&s2, &c2, (ACC)back * (ACC)d);
+    }
+    store_partial_of(partial, 0, group_reduce(s0 - c0, scratch, 0));
+    store_partial_of(partial, 1, group_reduce(s1 - c1, scratch, 0));
+    store_partial_of(partial, 2, group_reduce(s2 - c2, scratch, 0));
 }

@@ -85,7 +85,7 @@ class Kernels:
         self.acc = accumulator(self.device, kahan)
         self.program = program(queue.context, self.dtype, self.acc)
         self._kernels: dict[str, cl.Kernel] = {}
-        self._partials: dict[int, tuple] = {}    # groups -> (host array, device buffer)
+        self._partials: dict[tuple, tuple] = {}  # (groups, outputs) -> (host array, device buffer)
         self.cpu = bool(self.device.type & cl.device_type.CPU)
         self.max_group = min(LOCAL_CPU if self.cpu else LOCAL_1D, self.device.max_work_group_size)
         self.local_1d = 1 << (self.max_group.bit_length() - 1)      # a power of two
@@ -114,8 +114,9 @@ class Kernels:
         """Launch over n elements, rounded up to the 1-D group size (kernels bounds-check)."""
         return self.launch(name, (round_up(max(n, 1), self.local_1d),), (self.local_1d,), *args)
 
-    def reduce(self, name: str, n: int, *args) -> np.ndarray:
-        """Run a partial-sum kernel (reduce.cl) and return its per-group partials on the host (ACC dtype).
+    def reduce(self, name: str, n: int, *args, outputs: int = 1) -> np.ndarray:
+        """Run a partial-sum kernel (reduce.cl) and return its per-group partials on the host (ACC dtype):
+        shape (G,), or (outputs, G) for a kernel with several outputs.
 
         CPUs: one contiguous chunk of ⌈n/G⌉ terms per work item; GPUs: terms strided by G (coalesced).
         """
@@ -123,14 +124,15 @@ class Kernels:
         groups = max(1, min(-(-n // local), (2 if self.cpu else 8) * self.device.max_compute_units))
         items = groups * local
         span, step = (-(-n // items), 1) if self.cpu or items == 1 else (1, items)
-        if groups not in self._partials:
-            self._partials[groups] = (np.empty(groups, self.acc),
-                                      cl.Buffer(self.queue.context, cl.mem_flags.READ_WRITE, groups * self.acc.itemsize))
-        host, buffer = self._partials[groups]
+        key = (groups, outputs)
+        if key not in self._partials:
+            self._partials[key] = (np.empty((outputs, groups), self.acc), cl.Buffer(
+                self.queue.context, cl.mem_flags.READ_WRITE, outputs * groups * self.acc.itemsize))
+        host, buffer = self._partials[key]
         scratch = cl.LocalMemory(local * self.acc.itemsize)
         self.launch(name, (items,), (local,), buffer, scratch, np.int64(n), np.int64(span), np.int64(step), *args)
         cl.enqueue_copy(self.queue, host, buffer)
-        return host.copy()
+        return host[0].copy() if outputs == 1 else host.copy()
 
 
 def _power_of_two_at_least(n: int) -> int:

@@ -16,6 +16,9 @@ Engines (``make_fft(queue, engine)``):
 
 ``auto`` = host on CPU devices, vkfft on other devices when importable, else reikna.
 Plans are built on first use for a shape and cached per (context, shape, dtype).
+Each engine says which lengths it transforms fast (``fast_length``): 5-smooth for pocketfft's
+real transforms, 7-smooth for VkFFT, powers of two for reikna (radix 2 only; any other length
+goes through Bluestein's algorithm at a multiple of the cost).
 """
 from __future__ import annotations
 
@@ -58,6 +61,23 @@ class RealFFT:
     def inverse(self, spectrum, out):
         raise NotImplementedError
 
+    def fast_length(self, n: int) -> int:
+        """The smallest length ≥ n this engine transforms fast."""
+        raise NotImplementedError
+
+
+def smooth_length(n: int, primes=(2, 3, 5, 7)) -> int:
+    """The smallest m ≥ n whose prime factors are all in ``primes``."""
+    m = max(int(n), 1)
+    while True:
+        rest = m
+        for p in primes:
+            while rest % p == 0:
+                rest //= p
+        if rest == 1:
+            return m
+        m += 1
+
 
 # ---- host (pocketfft on mapped buffers) -------------------------------------------------------
 
@@ -79,6 +99,9 @@ class HostFFT(RealFFT):
     def __init__(self, kernels: Kernels, workers: int | None = None):
         super().__init__(kernels)
         self.workers = workers or os.cpu_count() or 1
+
+    def fast_length(self, n: int) -> int:
+        return scipy.fft.next_fast_len(int(n), real=True)
 
     def forward(self, x, out):
         with mapped(self.queue, x, cl.map_flags.READ) as src, \
@@ -104,6 +127,9 @@ class ReiknaFFT(RealFFT):
         super().__init__(kernels)
         self.per_transform = 2 if pack else 1
         self.cdtype = np.result_type(kernels.dtype, np.complex64)
+
+    def fast_length(self, n: int) -> int:
+        return smooth_length(n, (2,))
 
     def _plan(self, field_shape):
         """(compiled FFT, complex work array (P, Hp, Wp)) for a (K, Hp, Wp) field, built once."""
@@ -154,6 +180,9 @@ class VkFFT(RealFFT):
     """pyvkfft's out-of-place R2C / C2R (normalised like numpy); note C2R may overwrite its input."""
 
     name = "vkfft"
+
+    def fast_length(self, n: int) -> int:
+        return smooth_length(n, (2, 3, 5, 7))
 
     def _app(self, real_shape):
         key = ("vkfft", self.queue.context, tuple(real_shape), self.kernels.dtype)

@@ -13,6 +13,9 @@ import numpy as np
 import scipy.fft
 
 from ..errors import InputError
+from .blocks import map_blocks, scratch_buffer
+from .host_convolution import HostConvolution
+from .host_tv import haar_block, haar_limits, halo, tv_block_norm
 
 VDOT_ROW = 8192   # products per float32 partial sum in vdot
 COMPLEX_OF = {np.dtype(np.float32): np.dtype(np.complex64), np.dtype(np.float64): np.dtype(np.complex128)}
@@ -67,6 +70,14 @@ class NumpyBackend:
         return _result(out, x) if out is not None else x.copy()
 
     # ---- FFT ----------------------------------------------------------------------------
+    def fast_length(self, n: int) -> int:
+        """The smallest length ≥ n that pocketfft transforms fast (5-smooth for real transforms)."""
+        return scipy.fft.next_fast_len(int(n), real=True)
+
+    def convolution(self, transfer, filters, field_shape):
+        """A's filtered convolution: band chunks through pocketfft, pruned (see host_convolution)."""
+        return HostConvolution(transfer, filters, field_shape, self.dtype, self.workers)
+
     def fft2(self, x, out=None):
         """X = rfft2(x) over the last two axes: (..., Hp, Wp) real -> (..., Hp, Wp//2+1) complex."""
         return _result(out, scipy.fft.rfft2(x, workers=self.workers))
@@ -155,31 +166,52 @@ class NumpyBackend:
         """Soft threshold sign(x)·max(|x| − t, 0)."""
         return _result(out, np.sign(x) * np.maximum(np.abs(x) - t, 0))
 
-    def haar_tv(self, x, tau, weights, out=None):
-        """One parallel-proximal Haar step for weighted anisotropic TV (Kamilov 2016).
+    def haar_tv(self, x, tau, weights, out=None, nonneg: bool = False):
+        """One parallel-proximal Haar step for weighted anisotropic TV (Kamilov 2016), then max(·, 0) if ``nonneg``.
 
         For the D axes d with weight w_d > 0 (axes in cube order λ, y, x) and c_d = 2·D·τ·w_d:
             out_i = x_i + 1/(2D) Σ_d [clip((x_{i+1} − x_i)/2, ±c_d) + clip((x_{i−1} − x_i)/2, ±c_d)]
         which is the average over the 2D shifted 1-level Haar transforms of soft-thresholding
         their detail coefficients by 2√2·D·τ·w_d; a missing neighbour (boundary) adds 0.
+        Computed on cache-sized row blocks in parallel (backends/host_tv.py).
         """
-        active = [(axis, w) for axis, w in enumerate(weights) if w > 0]
-        total = np.zeros_like(x)
-        for axis, weight in active:
-            limit = 2.0 * len(active) * tau * weight
-            half_step = np.diff(x, axis=axis)
-            half_step *= 0.5
-            np.clip(half_step, -limit, limit, out=half_step)
-            total[_shifted(axis, x.ndim, 0, -1)] += half_step  # partner i+1
-            total[_shifted(axis, x.ndim, 1, None)] -= half_step  # partner i−1
-        total *= 1.0 / (2 * len(active)) if active else 0.0
-        total += x
-        return _result(out, total)
+        limits, scale = haar_limits(tau, weights)
+        k, h, w = x.shape
+        target = out if out is not None and not np.shares_memory(out, x) else np.empty_like(x)
+
+        def block(y0, y1, scratch):
+            top, bottom = halo(h, y0, y1)
+            step = haar_block(x[:, y0 - top:y1 + bottom], top, y1 - y0, limits, scale, scratch)
+            if nonneg:
+                np.clip(step, 0, None, out=target[:, y0:y1])
+            else:
+                target[:, y0:y1] = step
+
+        map_blocks(block, h, k * w * x.itemsize, self.workers)
+        return _result(out, target) if target is not out else out
 
     def tv_norm(self, x, weights) -> float:
-        """Σ_d w_d Σ_i |x_{i+1} − x_i| along axis d (cube order λ, y, x), in float64."""
-        return float(sum(w * np.sum(np.abs(np.diff(x, axis=axis)), dtype=np.float64)
-                         for axis, w in enumerate(weights) if w > 0))
+        """Σ_d w_d Σ_i |x_{i+1} − x_i| along axis d (cube order λ, y, x), in float64, by row blocks."""
+        k, h, w = x.shape
+
+        def block(y0, y1, _scratch):
+            top, bottom = halo(h, y0, y1)
+            return tv_block_norm(x[:, y0 - top:y1 + bottom], top, y1 - y0, weights)
+
+        return float(sum(map_blocks(block, h, k * w * x.itemsize, self.workers)))
+
+    def fista_stats(self, x_new, x_old, y) -> tuple[float, float, float]:
+        """(‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩) in one pass over row blocks: FISTA's change and restart test."""
+        new, old, ahead = (_as_rows(a) for a in (x_new, x_old, y))
+
+        def block(y0, y1, scratch):
+            current = new[:, y0:y1]
+            step = np.subtract(current, old[:, y0:y1], out=scratch_buffer(scratch, "step", current.shape, current.dtype))   # x⁺ − x
+            back = np.subtract(ahead[:, y0:y1], current, out=scratch_buffer(scratch, "back", current.shape, current.dtype))  # y − x⁺
+            return _row_dot(step, step), _row_dot(current, current), _row_dot(back, step)
+
+        parts = map_blocks(block, new.shape[1], new.shape[0] * new.shape[2] * new.itemsize, self.workers)
+        return tuple(float(np.sum([p[i] for p in parts], dtype=np.float64)) for i in range(3))
 
     def l1_norm(self, x) -> float:
         return float(np.sum(np.abs(x), dtype=np.float64))
@@ -190,14 +222,43 @@ class NumpyBackend:
         return np.dot(flat.astype(np.float64), flat.T.astype(np.float64))
 
     def bandmix(self, x, matrix, out=None):
-        """out_k = Σ_j M_kj x_j: a K×K matrix applied along the band axis."""
+        """out_k = Σ_j M_kj x_j: a K×J matrix applied along the band axis of x (J bands)."""
         flat = x.reshape(x.shape[0], -1)
-        mixed = np.dot(np.asarray(matrix, dtype=x.dtype), flat).reshape(x.shape)
+        mixed = np.dot(np.asarray(matrix, dtype=x.dtype), flat).reshape((np.shape(matrix)[0],) + x.shape[1:])
         return _result(out, mixed)
 
+    def subspace_tv(self, c, basis, tau, weights, out=None):
+        """c⁺ = Bᵀ·max(0, haar_tv(B·c)): the TV prox and projection in band space for a cube in a spectral
+        subspace (c (r, H, W) coefficients, B (K, r) orthonormal columns), on row blocks: each block's
+        K-band expansion lives only in cache."""
+        limits, scale = haar_limits(tau, weights)
+        r, h, w = c.shape
+        basis = np.ascontiguousarray(basis, dtype=self.dtype)
+        k = basis.shape[0]
+        target = out if out is not None and not np.shares_memory(out, c) else np.empty_like(c)
 
-def _shifted(axis: int, ndim: int, start, stop) -> tuple:
-    """Index selecting [start:stop] along ``axis`` and everything along the others."""
-    index = [slice(None)] * ndim
-    index[axis] = slice(start, stop)
-    return tuple(index)
+        def block(y0, y1, scratch):
+            top, bottom = halo(h, y0, y1)
+            rows = y1 - y0 + top + bottom
+            coefficients = scratch_buffer(scratch, "coefficients", (r, rows * w), c.dtype)
+            coefficients.reshape(r, rows, w)[...] = c[:, y0 - top:y1 + bottom]
+            expanded = scratch_buffer(scratch, "expanded", (k, rows * w), c.dtype)
+            np.matmul(basis, coefficients, out=expanded)                          # v = B·c
+            step = haar_block(expanded.reshape(k, rows, w), top, y1 - y0, limits, scale, scratch)
+            np.clip(step, 0, None, out=step)
+            projected = scratch_buffer(scratch, "projected", (r, (y1 - y0) * w), c.dtype)
+            np.matmul(basis.T, step.reshape(k, -1), out=projected)                # c⁺ = Bᵀ·max(0, ·)
+            target[:, y0:y1] = projected.reshape(r, y1 - y0, w)
+
+        map_blocks(block, h, k * w * c.itemsize, self.workers)
+        return _result(out, target) if target is not out else out
+
+
+def _as_rows(a: np.ndarray) -> np.ndarray:
+    """A view of ``a`` as (planes, rows, columns): (K, H, W) as it is, lower ranks with leading 1s."""
+    return a.reshape((1,) * (3 - a.ndim) + a.shape) if a.ndim < 3 else a.reshape(a.shape[0], a.shape[1], -1)
+
+
+def _row_dot(a: np.ndarray, b: np.ndarray) -> float:
+    """⟨a, b⟩ of two (P, R, C) blocks: float32 sums along each row's C products, the rows added in float64."""
+    return float(np.einsum("ijk,ijk->ij", a, b).sum(dtype=np.float64))

@@ -18,8 +18,11 @@ try:
     import pyopencl as cl
     import pyopencl.array as cla
 
+    from ..convolution import PrimitiveConvolution
+    from .cl_convolution import MappedConvolution
     from .cl_program import Kernels
-    from .fft import make_fft
+    from .fft import HostFFT, make_fft
+    from .host_convolution import HostConvolution
     _IMPORT_ERROR = None
 except ImportError as _exc:  # no pyopencl: the constructor says how to install a driver
     cl = cla = None
@@ -27,6 +30,7 @@ except ImportError as _exc:  # no pyopencl: the constructor says how to install 
 
 GRAM_CHUNK = 4096     # pixels per gram work item (at least)
 BANDMIX_TILE = 16     # pixels per bandmix work item (as in bandmix.cl)
+SUBSPACE_MAX = 32     # basis vectors the subspace_tv kernel holds (SUBSPACE_MAX in tv.cl)
 
 
 class OpenCLBackend:
@@ -85,6 +89,17 @@ class OpenCLBackend:
         check_memory(self.device, *problem_bytes(sensor_shape, field_shape, n_bands, self.dtype))
 
     # ---- FFT ----------------------------------------------------------------------------
+    def fast_length(self, n: int) -> int:
+        """The smallest length ≥ n the FFT engine transforms fast."""
+        return self.fft.fast_length(n)
+
+    def convolution(self, transfer, filters, field_shape):
+        """A's filtered convolution: the host pipeline on mapped buffers with the host engine, else primitives."""
+        if isinstance(self.fft, HostFFT):
+            return MappedConvolution(self.queue, HostConvolution(transfer, filters, field_shape, self.dtype,
+                                                                 self.fft.workers))
+        return PrimitiveConvolution(self, transfer, filters, field_shape)
+
     def fft2(self, x, out=None):
         """X = rfft2(x) over the last two axes: (..., Hp, Wp) real -> (..., Hp, Wp//2+1) complex."""
         out = self._out(out, x.shape[:-1] + (x.shape[-1] // 2 + 1,), self.cdtype)
@@ -165,8 +180,9 @@ class OpenCLBackend:
         """Soft threshold sign(x)·max(|x| − t, 0)."""
         return self._map("soft", x, out, x, self._real(t))
 
-    def haar_tv(self, x, tau, weights, out=None):
-        """One parallel-proximal Haar step for weighted anisotropic TV (see NumpyBackend.haar_tv):
+    def haar_tv(self, x, tau, weights, out=None, nonneg: bool = False):
+        """One parallel-proximal Haar step for weighted anisotropic TV (see NumpyBackend.haar_tv), then
+        max(·, 0) if ``nonneg``:
 
             out_i = x_i + 1/(2D) Σ_d [clip((x_{i+1} − x_i)/2, ±c_d) + clip((x_{i−1} − x_i)/2, ±c_d)],
             c_d = 2·D·τ·w_d over the D axes with w_d > 0; one kernel, one pass.
@@ -178,7 +194,7 @@ class OpenCLBackend:
         mask = np.int32(sum(1 << axis for axis, on in enumerate(active) if on))
         target = self.empty(x.shape) if out is not None and _same_buffer(out, x) else self._out(out, x.shape, x.dtype)
         self.kernels.grid3("haar_tv", x.shape, target, x, *_ints(k, h, w), mask, *limits,
-                           self._real(1.0 / (2 * d) if d else 0.0))
+                           self._real(1.0 / (2 * d) if d else 0.0), np.int32(bool(nonneg)))
         return self.copy(target, out) if target is not out and out is not None else target
 
     def tv_norm(self, x, weights) -> float:
@@ -186,6 +202,11 @@ class OpenCLBackend:
         acc = self.kernels.acc.type
         w = [acc(wd if wd > 0 else 0.0) for wd in weights]
         return _total(self.kernels.reduce("tv_norm", x.size, x, *_ints(*x.shape), *w))
+
+    def fista_stats(self, x_new, x_old, y) -> tuple[float, float, float]:
+        """(‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩) in one pass (differences in REAL, products in ACC)."""
+        partials = self.kernels.reduce("fista_stats", x_new.size, x_new, x_old, y, outputs=3)
+        return tuple(_total(row) for row in partials)
 
     def l1_norm(self, x) -> float:
         return _total(self.kernels.reduce("l1", x.size, x))
@@ -205,11 +226,30 @@ class OpenCLBackend:
         return upper + np.triu(upper, 1).T
 
     def bandmix(self, x, matrix, out=None):
-        """out_k = Σ_j M_kj x_j: a K×K matrix (from the host) applied along the band axis."""
-        k, pixels = x.shape[0], x.size // x.shape[0]
+        """out_k = Σ_j M_kj x_j: a K×J matrix (from the host) applied along the band axis of x (J bands)."""
+        rows, cols = np.shape(matrix)
+        pixels = x.size // x.shape[0]
         m = cla.to_device(self.queue, np.ascontiguousarray(matrix, dtype=self.dtype))
-        target = self.empty(x.shape) if out is not None and _same_buffer(out, x) else self._out(out, x.shape, x.dtype)
-        self.kernels.grid2("bandmix", -(-pixels // BANDMIX_TILE), k, target, x, m, np.int32(k), np.int64(pixels))
+        shape = (rows,) + x.shape[1:]
+        target = self.empty(shape) if out is not None and _same_buffer(out, x) else self._out(out, shape, x.dtype)
+        self.kernels.grid2("bandmix", -(-pixels // BANDMIX_TILE), rows, target, x, m, np.int32(cols), np.int64(pixels))
+        return self.copy(target, out) if target is not out and out is not None else target
+
+    def subspace_tv(self, c, basis, tau, weights, out=None):
+        """c⁺ = Bᵀ·max(0, haar_tv(B·c)) (see NumpyBackend.subspace_tv): one work item per pixel expands its
+        spectrum and its four neighbours' band by band, so the K-band cube never exists."""
+        r, h, w = c.shape
+        k = basis.shape[0]
+        if r > SUBSPACE_MAX:
+            raise ValueError(f"subspace of {r} vectors: the OpenCL kernel holds at most {SUBSPACE_MAX}")
+        active = [wd > 0 for wd in weights]
+        d = sum(active)
+        limits = [self._real(2.0 * d * tau * wd if on else 0.0) for wd, on in zip(weights, active)]
+        mask = np.int32(sum(1 << axis for axis, on in enumerate(active) if on))
+        b = cla.to_device(self.queue, np.ascontiguousarray(basis, dtype=self.dtype))
+        target = self.empty(c.shape) if out is not None and _same_buffer(out, c) else self._out(out, c.shape, c.dtype)
+        self.kernels.grid3("subspace_tv", (1, h, w), target, c, b, *_ints(k, r, h, w), mask, *limits,
+                           self._real(1.0 / (2 * d) if d else 0.0))
         return self.copy(target, out) if target is not out and out is not None else target
 
     # ---- helpers ------------------------------------------------------------------------

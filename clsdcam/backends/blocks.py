@@ -1,0 +1,67 @@
+"""Cache-sized row blocks of (K, H, W) cubes, spread over a few threads.
+
+NumPy releases the GIL inside its loops, so each thread's ufuncs run on their own core.
+A block holds every band of a few rows (about ``BLOCK_BYTES`` per array), so the
+temporaries of a multi-step computation stay in cache and the cube is read once.
+Thread t gets the t-th contiguous span of rows and walks it block by block.
+"""
+from __future__ import annotations
+
+import atexit
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable
+
+import numpy as np
+
+BLOCK_BYTES = 256 << 10
+
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+
+
+@atexit.register
+def _shutdown():
+    for pool in _POOLS.values():
+        pool.shutdown(wait=False)
+    _POOLS.clear()
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    if workers not in _POOLS:
+        _POOLS[workers] = ThreadPoolExecutor(workers, thread_name_prefix="clsdcam-blocks")
+    return _POOLS[workers]
+
+
+def rows_per_block(row_bytes: int) -> int:
+    return max(1, BLOCK_BYTES // max(row_bytes, 1))
+
+
+def spans(n_rows: int, parts: int) -> list[tuple[int, int]]:
+    """``parts`` contiguous [start, stop) spans covering n_rows (empty ones dropped)."""
+    edges = [n_rows * i // parts for i in range(parts + 1)]
+    return [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def map_blocks(work: Callable[[int, int, dict], object], n_rows: int, row_bytes: int, workers: int) -> list:
+    """``work(y0, y1, scratch)`` over row blocks covering [0, n_rows); its results in row order.
+
+    ``scratch`` is a dict private to the calling thread, for buffers reused across its blocks.
+    """
+    block = rows_per_block(row_bytes)
+
+    def walk(span):
+        scratch: dict = {}
+        return [work(y0, min(y0 + block, span[1]), scratch) for y0 in range(span[0], span[1], block)]
+
+    parts = spans(n_rows, max(1, min(workers, -(-n_rows // block))))
+    if len(parts) == 1:
+        return walk(parts[0])
+    return [r for results in _pool(len(parts)).map(walk, parts) for r in results]
+
+
+def scratch_buffer(scratch: dict, name: str, shape, dtype) -> np.ndarray:
+    """A ``shape`` array from the thread's ``scratch`` (kept and reused across its blocks; contents undefined)."""
+    size = int(np.prod(shape))
+    held = scratch.get(name)
+    if held is None or held.size < size or held.dtype != np.dtype(dtype):
+        held = scratch[name] = np.empty(size, dtype)
+    return held[:size].reshape(shape)
