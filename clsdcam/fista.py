@@ -20,8 +20,13 @@ Three safeguards, each recorded in the history:
   the best point then decreases F) halves the step before going back to the best iterate.
 
 It stops after ``iters`` iterations, when the relative change ‖x⁺ − x‖/‖x⁺‖ falls below
-``tol``, when ``should_stop`` says so, on Ctrl-C ("interrupted", returning the best
-iterate), or after too many back-offs ("diverged"), and says why.
+``tol`` ("tolerance"), when the objective fell by less than ``plateau`` (relative) between two
+checkpoints ("plateau"), when ``should_stop`` says so, on Ctrl-C ("interrupted", returning
+the best iterate), or after too many back-offs ("diverged"), and says why.
+
+The loop is an object (:class:`Fista`) so that a solver can run it in phases and move its
+iterates to another space in between (:meth:`Fista.change_space`: the spectral subspace),
+keeping the momentum t; :func:`fista` is one phase from x0.
 """
 from __future__ import annotations
 
@@ -51,110 +56,154 @@ class FistaResult:
     history: list[dict] = field(default_factory=list)
 
 
-@dataclass
-class _State:
-    """The iterates and the safeguards' memory."""
+@dataclass(frozen=True)
+class Rules:
+    """When to stop, how often to check the objective, whether to restart the momentum."""
 
-    x: Any
-    x_prev: Any
-    y: Any
-    z: Any
-    best: Any
-    best_objective: float
-    step: float
-    eps: float
-    t: float = 1.0
-    rolled_back: bool = False
-    backoffs: int = 0
+    tol: float = 0.0
+    plateau: float = 0.0
+    objective_every: int = 10
+    restart: bool = True
+
+
+class Fista:
+    """FISTA's iterates (x, x_prev, y, z), momentum and safeguards, run phase by phase.
+
+    gradient_step(y, out, step) writes z = y − step·∇f(y) into out and returns f(y);
+    prox(z, out, step) writes prox_{step·g}(z) into out; objective(x) returns F(x) (without
+    it, no checkpoints, no plateau rule and no back-off on rises). on_iteration(record, x)
+    may add fields to the record; should_stop() returns a reason to stop or None.
+    """
+
+    def __init__(self, backend, x0, *, step: float, rules: Rules = Rules(),
+                 objective: Callable[[Any], float] | None = None):
+        self.backend = backend
+        self.rules = rules
+        self.eps = ROUNDOFF * float(np.finfo(backend.dtype).eps)
+        self.history: list[dict] = []
+        self.t = 1.0
+        self.backoffs = 0
+        self._start = time.perf_counter()
+        self._enter(x0, step, objective)
+
+    def _enter(self, x0, step: float, objective):
+        """Start a space: iterates from x0 (copied), the best so far = x0."""
+        be = self.backend
+        self.x, self.x_prev, self.y, self.z, self.best = (be.copy(x0) for _ in range(5))
+        self.objective = objective
+        self.best_objective = objective(self.x) if objective else math.inf
+        self.last_checkpoint = self.best_objective
+        self.step = step
+        self.rolled_back = False
+
+    def change_space(self, mapping: Callable[[Any], Any], step: float, objective=None, keep_momentum: bool = True):
+        """Move x, x_prev and y through ``mapping`` (e.g. onto a spectral basis); keep t unless told not to."""
+        x, x_prev, y = (mapping(a) for a in (self.x, self.x_prev, self.y))
+        t = self.t if keep_momentum else 1.0
+        self._enter(x, step, objective)
+        be = self.backend
+        be.copy(x_prev, out=self.x_prev)
+        be.copy(y, out=self.y)
+        self.t = t
+
+    @property
+    def iterations(self) -> int:
+        return len(self.history)
+
+    def run(self, gradient_step: Callable, prox: Callable, iters: int,
+            on_iteration: Callable[[dict, Any], None] | None = None,
+            should_stop: Callable[[], str | None] | None = None) -> str | None:
+        """Up to ``iters`` more iterations; the reason it stopped early, or None."""
+        try:
+            for i in range(iters):
+                k = self.iterations + 1
+                record = self._iterate(gradient_step, prox)
+                record["iteration"] = k
+                if self.objective is not None and (k % self.rules.objective_every == 0 or k == 1 or i == iters - 1):
+                    record.update(self._checkpoint(record))
+                record["objective"] = record.get("objective", math.nan)
+                record["seconds"] = time.perf_counter() - self._start
+                if on_iteration is not None:
+                    on_iteration(record, self.x)
+                self.history.append(record)
+                reason = self._stop_reason(record, should_stop)
+                if reason:
+                    return reason
+        except KeyboardInterrupt:
+            if self.objective is not None:
+                self.backend.copy(self.best, out=self.x)
+            return "interrupted"
+        return None
+
+    # ---- one iteration and its safeguards -------------------------------------------------
+    def _iterate(self, gradient_step, prox) -> dict:
+        """One FISTA step with the adaptive restart test; returns the record's numbers."""
+        be = self.backend
+        data = gradient_step(self.y, self.z, self.step)
+        self.x, self.x_prev = self.x_prev, self.x
+        prox(self.z, self.x, self.step)
+        step_sq, norm_sq, slope = be.fista_stats(self.x, self.x_prev, self.y)   # ‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩
+        change = _ratio(step_sq, norm_sq)
+        uphill = self.rules.restart and slope > 0
+        if uphill:
+            self.t = 1.0
+        t_next = next_momentum(self.t)
+        be.extrapolate(self.x, self.x_prev, (self.t - 1.0) / t_next, out=self.y)  # y = x⁺ + β(x⁺ − x)
+        self.t = t_next
+        record = {"data": data, "change": change, "momentum": self.t, "restart": bool(uphill), "step": self.step,
+                  "rollback": False, "backoff": False}
+        if not (math.isfinite(data) and math.isfinite(change)) or data > BLOWUP * self.best_objective:
+            record.update(self._back_off())
+        return record
+
+    def _checkpoint(self, record: dict) -> dict:
+        """Keep x if F(x) is the best so far; otherwise go back to the best (and back off if needed)."""
+        value = self.objective(self.x)
+        if math.isfinite(value) and value <= self.best_objective + self.eps * abs(self.best_objective):
+            self.best_objective, self.rolled_back = min(value, self.best_objective), False
+            self.backend.copy(self.x, out=self.best)
+            return {"objective": value}
+        if self.rolled_back or not math.isfinite(value):
+            return {**self._back_off(), "objective": self.best_objective}
+        self.rolled_back = True
+        self._go_to_best()
+        return {"rollback": True, "objective": self.best_objective}
+
+    def _back_off(self) -> dict:
+        """Halve the step and restart from the best iterate."""
+        self.step *= 0.5
+        self.backoffs += 1
+        self.rolled_back = False
+        self._go_to_best()
+        return {"backoff": True, "rollback": True, "step": self.step}
+
+    def _go_to_best(self):
+        for array in (self.x, self.x_prev, self.y):
+            self.backend.copy(self.best, out=array)
+        self.t = 1.0
+
+    def _stop_reason(self, record: dict, should_stop) -> str | None:
+        rules = self.rules
+        if self.backoffs > MAX_BACKOFFS:
+            return "diverged"
+        if rules.tol > 0 and not record.get("rollback") and record["change"] < rules.tol:
+            return "tolerance"
+        if rules.plateau > 0 and math.isfinite(record["objective"]) and not record.get("rollback"):
+            previous, self.last_checkpoint = self.last_checkpoint, record["objective"]
+            if record["iteration"] > 1 and previous - record["objective"] < rules.plateau * abs(record["objective"]):
+                return "plateau"
+        return should_stop() if should_stop is not None else None
 
 
 def fista(gradient_step: Callable, prox: Callable, backend, x0, *, step: float, iters: int, tol: float = 0.0,
           objective: Callable[[Any], float] | None = None, objective_every: int = 10, restart: bool = True,
-          on_iteration: Callable[[dict, Any], None] | None = None,
+          plateau: float = 0.0, on_iteration: Callable[[dict, Any], None] | None = None,
           should_stop: Callable[[], str | None] | None = None) -> FistaResult:
-    """Run FISTA from x0 (a device array, not modified).
-
-    gradient_step(y, out, step) writes z = y − step·∇f(y) into out and returns f(y);
-    prox(z, out, step) writes prox_{step·g}(z) into out; objective(x) returns F(x) (without
-    it, no checkpoints and no back-off on rises). on_iteration(record, x) may add fields to
-    the record. should_stop() returns a reason to stop or None.
-    """
-    be = backend
-    s = _State(x=be.copy(x0), x_prev=be.copy(x0), y=be.copy(x0), z=be.copy(x0), best=be.copy(x0),
-               best_objective=objective(x0) if objective else math.inf, step=step,
-               eps=ROUNDOFF * float(np.finfo(be.dtype).eps))
-    history: list[dict] = []
-    start = time.perf_counter()
-    reason = "iterations"
-    try:
-        for k in range(1, iters + 1):
-            record = _iterate(be, gradient_step, prox, s, restart)
-            record["iteration"] = k
-            if objective is not None and (k % objective_every == 0 or k == 1 or k == iters):
-                record.update(_checkpoint(be, objective, s, record))
-            record["objective"] = record.get("objective", math.nan)
-            record["seconds"] = time.perf_counter() - start
-            if on_iteration is not None:
-                on_iteration(record, s.x)
-            history.append(record)
-            stop = _stop_reason(record, s, tol, should_stop)
-            if stop:
-                reason = stop
-                break
-    except KeyboardInterrupt:
-        reason = "interrupted"
-        if objective is not None:
-            be.copy(s.best, out=s.x)
-    return FistaResult(x=s.x, iterations=len(history), stop_reason=reason, step=s.step, history=history)
-
-
-def _iterate(be, gradient_step, prox, s: _State, restart: bool) -> dict:
-    """One FISTA step with the adaptive restart test; returns the record's numbers."""
-    data = gradient_step(s.y, s.z, s.step)
-    s.x, s.x_prev = s.x_prev, s.x
-    prox(s.z, s.x, s.step)
-    step_sq, norm_sq, slope = be.fista_stats(s.x, s.x_prev, s.y)   # ‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩
-    change = _ratio(step_sq, norm_sq)
-    uphill = restart and slope > 0
-    if uphill:
-        s.t = 1.0
-    t_next = next_momentum(s.t)
-    be.extrapolate(s.x, s.x_prev, (s.t - 1.0) / t_next, out=s.y)  # y = x⁺ + β(x⁺ − x)
-    s.t = t_next
-    record = {"data": data, "change": change, "momentum": s.t, "restart": bool(uphill), "step": s.step,
-              "rollback": False, "backoff": False}
-    if not (math.isfinite(data) and math.isfinite(change)) or data > BLOWUP * s.best_objective:
-        record.update(_back_off(be, s))
-    return record
-
-
-def _checkpoint(be, objective, s: _State, record: dict) -> dict:
-    """Keep x if F(x) is the best so far; otherwise go back to the best (and back off if needed)."""
-    value = objective(s.x)
-    if math.isfinite(value) and value <= s.best_objective + s.eps * abs(s.best_objective):
-        s.best_objective, s.rolled_back = min(value, s.best_objective), False
-        be.copy(s.x, out=s.best)
-        return {"objective": value}
-    if s.rolled_back or not math.isfinite(value):
-        return {**_back_off(be, s), "objective": s.best_objective}
-    s.rolled_back = True
-    _go_to_best(be, s)
-    return {"rollback": True, "objective": s.best_objective}
-
-
-def _back_off(be, s: _State) -> dict:
-    """Halve the step and restart from the best iterate."""
-    s.step *= 0.5
-    s.backoffs += 1
-    s.rolled_back = False
-    _go_to_best(be, s)
-    return {"backoff": True, "rollback": True, "step": s.step}
-
-
-def _go_to_best(be, s: _State):
-    for array in (s.x, s.x_prev, s.y):
-        be.copy(s.best, out=array)
-    s.t = 1.0
+    """Run FISTA from x0 (a device array, not modified) in one phase; see :class:`Fista`."""
+    loop = Fista(backend, x0, step=step, objective=objective,
+                 rules=Rules(tol=tol, plateau=plateau, objective_every=objective_every, restart=restart))
+    reason = loop.run(gradient_step, prox, iters, on_iteration, should_stop) or "iterations"
+    return FistaResult(x=loop.x, iterations=loop.iterations, stop_reason=reason, step=loop.step, history=loop.history)
 
 
 def _ratio(diff: float, norm: float) -> float:
@@ -162,11 +211,3 @@ def _ratio(diff: float, norm: float) -> float:
     if norm == 0.0:
         return 0.0 if diff == 0.0 else math.inf
     return math.sqrt(diff / norm) if math.isfinite(diff) and math.isfinite(norm) else math.inf
-
-
-def _stop_reason(record: dict, s: _State, tol: float, should_stop) -> str | None:
-    if s.backoffs > MAX_BACKOFFS:
-        return "diverged"
-    if tol > 0 and not record.get("rollback") and record["change"] < tol:
-        return "tolerance"
-    return should_stop() if should_stop is not None else None

@@ -27,7 +27,7 @@ class ForwardModel:
     """A and Aᵀ for one calibration on one backend (``geometry``: the paper's field unless given)."""
 
     def __init__(self, backend, psf: np.ndarray, filters: np.ndarray, field_shape=None,
-                 geometry: FieldGeometry | None = None, convolution=None):
+                 geometry: FieldGeometry | None = None, convolution=None, skip_unseen: bool = True):
         if filters.shape[-2:] != psf.shape:
             raise InputError(f"filters {filters.shape[-2:]} and psf {psf.shape} differ in shape")
         self.backend = backend
@@ -39,7 +39,7 @@ class ForwardModel:
         self.cube_shape = (self.n_bands,) + self.field_shape
         self.psf = psf
         self.convolution = convolution or backend.convolution(transfer_function(psf, self.geometry), filters,
-                                                              self.field_shape)
+                                                              self.field_shape, skip_unseen=skip_unseen)
 
     def with_filters(self, filters: np.ndarray) -> "ForwardModel":
         """The same PSF and field with other filters (the spectral subspace's G_j = Σ_k B_kj F_k)."""

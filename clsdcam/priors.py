@@ -43,6 +43,10 @@ class Regularizer:
             terms.append("l1")
         return terms
 
+    def inactive_terms(self) -> list[str]:
+        """Terms with zero weight: never evaluated."""
+        return [term for term in ("tv", "lowrank", "l1") if term not in self.active_terms()]
+
     def value(self, backend, v) -> float:
         """g(v) without the indicator (v is assumed non-negative)."""
         total = 0.0

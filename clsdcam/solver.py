@@ -7,6 +7,11 @@ user's weights are relative: τ₁ and τ₃ are fractions of ‖Aᵀb‖_∞ (t
 an L1 prior would zero the cube), τ₂ a fraction of σ₁(Aᵀb), the largest singular value of
 the pixels×bands unfolding of Aᵀb. So scaling the measurement by s scales the cube by s,
 and the same weights suit any PSF or filter normalisation.
+
+Skips (``skip=True``, the default; ``skip=False`` is the full solver: the paper's field, every
+band, every iteration in band space): the support-sized field, no FFTs for bands no filter
+sees, zero-weight terms never evaluated, and the spectral subspace (see :mod:`clsdcam.phases`).
+Each is reported in ``Result.attrs["skips"]`` with the FFT work it saved.
 """
 from __future__ import annotations
 
@@ -20,9 +25,12 @@ from . import __version__
 from .backends import get_backend
 from .errors import InputError, shape_text
 from .io import require_finite
-from .fista import fista
-from .model import ForwardModel, default_field_shape
+from .fista import Fista, Rules
+from .model import ForwardModel
+from .phases import Phases, Tracker
 from .priors import Prox, Regularizer, singular_values
+from .problem import Problem
+from .skips import bands_line, field_line, plan_geometry, terms_line
 
 DEFAULT_ITERS = 300
 DEFAULT_TV = 1e-3  # tuned on the simulated target and LED scenes (README, "Choosing --tv")
@@ -39,6 +47,9 @@ class Settings:
     lowrank: float = 0.0
     l1: float = 0.0
     tol: float = DEFAULT_TOL
+    plateau: float = 0.0           # stop when F fell by less than this (relative) between checkpoints
+    skip: bool = True              # skip what the scene doesn't need (False: the full solver)
+    rank: int = 0                  # spectral basis vectors: 0 = automatic, ≥ K = no subspace
     dtype: str = "float32"
     objective_every: int = 10      # F(x) evaluated (and the best iterate kept) this often
     restart: bool = True           # adaptive momentum restart (O'Donoghue–Candès)
@@ -49,7 +60,8 @@ class Settings:
         object.__setattr__(self, "tv_weights", tuple(float(w) for w in self.tv_weights))
         _require(isinstance(self.iters, (int, np.integer)) and self.iters >= 1, f"--iters {self.iters}: must be an integer ≥ 1")
         _require(_finite_nonneg(self.step_scale) and self.step_scale > 0, f"step_scale {self.step_scale}: must be > 0")
-        for name in ("tv", "lowrank", "l1", "tol"):
+        _require(isinstance(self.rank, (int, np.integer)) and self.rank >= 0, f"--rank {self.rank}: must be an integer ≥ 0")
+        for name in ("tv", "lowrank", "l1", "tol", "plateau"):
             value = getattr(self, name)
             _require(_finite_nonneg(value), f"--{name} {value}: must be a finite number ≥ 0")
         _require(len(self.tv_weights) == 3 and all(_finite_nonneg(w) for w in self.tv_weights),
@@ -98,54 +110,54 @@ class Solver:
         self.settings = settings or Settings()
         self.backend = get_backend(backend, self.settings.dtype, device, fft) if isinstance(backend, str) else backend
         self.calibration = calibration
+        self.geometry = plan_geometry(calibration.psf, self.backend, self.settings.skip)
         self._check_memory()
-        self.model = ForwardModel(self.backend, calibration.psf, calibration.filters)
+        self.model = ForwardModel(self.backend, calibration.psf, calibration.filters, geometry=self.geometry,
+                                  skip_unseen=self.settings.skip)
         self.lipschitz = self.model.lipschitz()
         self._b = None
-        self._r = self.backend.empty(self.model.sensor_shape)
 
     def solve(self, measurement: np.ndarray, x0: np.ndarray | None = None,
               progress: Callable[[dict], None] | None = None, snapshots=()) -> Result:
         """Reconstruct one (H, W) measurement.
 
-        x0 is an optional warm start in data units: a (K, H, W) cube or a whole field (``Result.full_field``); ``snapshots`` lists iterations at
-        which a copy of the cube is kept in ``Result.snapshots`` (e.g. to measure accuracy on the way).
+        x0 is an optional warm start in data units: a (K, H, W) cube or a whole field (``Result.full_field``);
+        ``snapshots`` lists iterations at which a copy of the cube is kept in ``Result.snapshots`` (e.g. to
+        measure accuracy on the way).
         """
         b = self._checked(measurement)
         scale = float(np.max(np.abs(b)))
         if scale == 0.0:
             return self._result(self.model.embed(np.zeros(self._cube_window_shape())), 1.0, [], "zero measurement")
-        be, model = self.backend, self.model
+        be, s = self.backend, self.settings
         self._b = be.to_device(b / scale)
         regularizer = self._regularizer()
-        prox = Prox(be, regularizer, model.cube_shape)
-        start = self._start(x0, scale)
-        kept: dict[int, np.ndarray] = {}
-
-        def on_iteration(record, x):
-            for key in ("data", "objective"):
-                record[key] *= scale ** 2
-            if record["iteration"] in snapshots:
-                kept[record["iteration"]] = (model.window(x) * scale).astype(np.float32)
-            if progress is not None:
-                progress(record)
-
-        result = fista(self._gradient_step, lambda z, out, step: prox(z, step, out), be, start,
-                       step=self.settings.step_scale / self.lipschitz, iters=self.settings.iters,
-                       tol=self.settings.tol, objective=lambda x: self._objective(regularizer, x),
-                       objective_every=self.settings.objective_every, restart=self.settings.restart,
-                       on_iteration=on_iteration)
-        out = self._result(result.x, scale, result.history, result.stop_reason, regularizer, result.step)
-        out.snapshots = kept
+        problem = self.band_problem(regularizer)
+        loop = Fista(be, self._start(x0, scale), step=s.step_scale / self.lipschitz, objective=problem.objective,
+                     rules=Rules(tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart))
+        tracker = Tracker(self.model, scale, snapshots, progress)
+        tracker.report.lines += [line for line in (field_line(self.geometry), self._bands_line(),
+                                                   terms_line(regularizer.inactive_terms())) if line]
+        phases = Phases(self, loop, tracker, regularizer)
+        reason, problem = phases.run(problem, warm_started=x0 is not None)
+        out = self._result(problem.solution(loop.x), scale, loop.history, reason, regularizer, loop.step, tracker)
+        out.snapshots = tracker.kept
         return out
+
+    def band_problem(self, regularizer: Regularizer) -> Problem:
+        """The problem on the band cube (the full problem)."""
+        prox = Prox(self.backend, regularizer, self.model.cube_shape)
+        return Problem(self.model, self._b, prox, lambda x: regularizer.value(self.backend, x), self.model.n_bands)
 
     # ---- pieces -------------------------------------------------------------------------
     def _check_memory(self):
         """Devices with their own memory say up front (InputError) when the problem cannot fit."""
         check = getattr(self.backend, "check_problem", None)
         if check is not None:
-            shape = self.calibration.psf.shape
-            check(shape, default_field_shape(shape), self.calibration.filters.shape[0])
+            check(self.geometry.sensor, self.geometry.field, self.calibration.filters.shape[0])
+
+    def _bands_line(self):
+        return bands_line(self.calibration.filters) if self.settings.skip else None
 
     def _start(self, x0, scale: float):
         """The first iterate: zero, a (K, H, W) sensor-window cube (zero around it), or a whole field."""
@@ -177,25 +189,8 @@ class Solver:
         return Regularizer(tv=s.tv * data_scale, tv_weights=s.tv_weights, lowrank=s.lowrank * sigma1,
                            l1=s.l1 * data_scale)
 
-    def _gradient_step(self, y, out, step: float) -> float:
-        """out = y − step·Aᵀ(Ay − b); returns f(y) = ½‖Ay − b‖²."""
-        be = self.backend
-        self._residual(y)
-        data = 0.5 * be.vdot(self._r, self._r)
-        self.model.adjoint(self._r, out=out, y=y, step=step)
-        return data
-
-    def _residual(self, x):
-        """r = Ax − b (in the solver's buffer)."""
-        self.model.forward(x, out=self._r)
-        return self.backend.axpy(-1.0, self._b, self._r, out=self._r)
-
-    def _objective(self, regularizer: Regularizer, x) -> float:
-        """F(x) = ½‖Ax − b‖² + g(x) for the normalised b."""
-        self._residual(x)
-        return 0.5 * self.backend.vdot(self._r, self._r) + regularizer.value(self.backend, x)
-
-    def _result(self, x, scale, history, reason, regularizer: Regularizer | None = None, step: float = 0.0) -> Result:
+    def _result(self, x, scale, history, reason, regularizer: Regularizer | None = None, step: float = 0.0,
+                tracker: Tracker | None = None) -> Result:
         model = self.model
         cube = (model.window(x) * scale).astype(np.float32)
         full = (self.backend.to_host(x) * scale).astype(np.float32) if self.settings.full_field else None
@@ -213,12 +208,14 @@ class Solver:
             "field_shape": model.field_shape,
             "window_offset": model.offset,
             "active_priors": ",".join(regularizer.active_terms()) if regularizer else "",
+            "skips": tracker.report.summary() if tracker else "",
+            "fft_work_saved": tracker.report.saved if tracker else 0.0,
+            "final_rank": history[-1]["rank"] if history else model.n_bands,
             "clsdcam_version": __version__,
             "calibration": self.calibration.source,
         }
         return Result(cube=cube, wavelengths=np.asarray(self.calibration.wavelengths), history=history,
                       attrs=attrs, full_field=full)
-
 
 
 def reconstruct(measurement, calibration, backend="numpy", device: str | None = None, x0=None,

@@ -43,7 +43,8 @@ def band_chunks(seen: np.ndarray, per_chunk: int) -> list[tuple[int, int]]:
 class HostConvolution:
     """The filtered convolution for one transfer function and filter set, on host (NumPy) arrays."""
 
-    def __init__(self, transfer: np.ndarray, filters: np.ndarray, field_shape, dtype, workers: int):
+    def __init__(self, transfer: np.ndarray, filters: np.ndarray, field_shape, dtype, workers: int,
+                 skip_unseen: bool = True):
         self.dtype = np.dtype(dtype)
         cdtype = np.result_type(self.dtype, np.complex64)
         self.field_shape = tuple(field_shape)
@@ -53,7 +54,8 @@ class HostConvolution:
         self.transfer = np.ascontiguousarray(transfer, dtype=cdtype)
         self.conj_transfer = np.conj(self.transfer)
         self.filters = np.ascontiguousarray(filters, dtype=self.dtype)
-        self.seen = seen_bands(filters)
+        self.skip_unseen = skip_unseen
+        self.seen = seen_bands(filters) if skip_unseen else np.ones(self.n_bands, bool)
         per_band = self.transfer.nbytes
         self.chunks = band_chunks(self.seen, max(1, CHUNK_BYTES // per_band))
 
@@ -91,7 +93,7 @@ class HostConvolution:
             out[k] = 0 if y is None else y[k]
 
     def with_filters(self, filters: np.ndarray) -> "HostConvolution":
-        return HostConvolution(self.transfer, filters, self.field_shape, self.dtype, self.workers)
+        return HostConvolution(self.transfer, filters, self.field_shape, self.dtype, self.workers, self.skip_unseen)
 
     def transforms(self) -> int:
         """2-D transforms per forward + adjoint pair (pruned ones counted as whole)."""

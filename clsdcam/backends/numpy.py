@@ -74,9 +74,9 @@ class NumpyBackend:
         """The smallest length ≥ n that pocketfft transforms fast (5-smooth for real transforms)."""
         return scipy.fft.next_fast_len(int(n), real=True)
 
-    def convolution(self, transfer, filters, field_shape):
+    def convolution(self, transfer, filters, field_shape, skip_unseen: bool = True):
         """A's filtered convolution: band chunks through pocketfft, pruned (see host_convolution)."""
-        return HostConvolution(transfer, filters, field_shape, self.dtype, self.workers)
+        return HostConvolution(transfer, filters, field_shape, self.dtype, self.workers, skip_unseen)
 
     def fft2(self, x, out=None):
         """X = rfft2(x) over the last two axes: (..., Hp, Wp) real -> (..., Hp, Wp//2+1) complex."""

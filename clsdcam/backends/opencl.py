@@ -93,11 +93,11 @@ class OpenCLBackend:
         """The smallest length ≥ n the FFT engine transforms fast."""
         return self.fft.fast_length(n)
 
-    def convolution(self, transfer, filters, field_shape):
+    def convolution(self, transfer, filters, field_shape, skip_unseen: bool = True):
         """A's filtered convolution: the host pipeline on mapped buffers with the host engine, else primitives."""
         if isinstance(self.fft, HostFFT):
             return MappedConvolution(self.queue, HostConvolution(transfer, filters, field_shape, self.dtype,
-                                                                 self.fft.workers))
+                                                                 self.fft.workers, skip_unseen))
         return PrimitiveConvolution(self, transfer, filters, field_shape)
 
     def fft2(self, x, out=None):

@@ -1,0 +1,72 @@
+"""What a scene doesn't need, decided once per calibration or per solve, and what skipping it saved.
+
+* field: the scene area the PSF cannot bring onto the sensor is not part of the problem
+  (support-sized field, :func:`clsdcam.geometry.support_geometry`);
+* bands: a band no pixel's filter sees adds nothing to b and gets no gradient: no FFTs for it;
+* subspace: when the scene's spectra span few dimensions, r spectral basis vectors instead of
+  K bands (:mod:`clsdcam.subspace`): 4r FFTs per iteration instead of 4K;
+* terms: a regulariser with zero weight is never evaluated.
+
+Work is counted in 2-D FFT voxels (transforms × field size), against the full solver's: the
+paper's 2H × 2W field, every band, every iteration. ``--no-skip`` is that full solver.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .convolution import seen_bands
+from .errors import shape_text
+from .geometry import FieldGeometry, centred_geometry, support_geometry
+
+
+def plan_geometry(psf: np.ndarray, backend, skip: bool) -> FieldGeometry:
+    """The support-sized field at the engine's fast lengths (skip), or the paper's 2H × 2W."""
+    return support_geometry(psf, backend.fast_length) if skip else centred_geometry(psf.shape)
+
+
+@dataclass
+class SkipReport:
+    """The skips taken in one solve, as lines a person reads and numbers a benchmark reads."""
+
+    lines: list[str] = field(default_factory=list)
+    full_work: float = 0.0      # FFT voxels the full solver would have transformed
+    done_work: float = 0.0      # FFT voxels transformed
+
+    @property
+    def saved(self) -> float:
+        """Fraction of the full solver's FFT work not done."""
+        return 1.0 - self.done_work / self.full_work if self.full_work else 0.0
+
+    def summary(self) -> str:
+        return "; ".join(self.lines + [f"FFT work saved: {100 * self.saved:.0f}%"])
+
+
+def field_line(geometry: FieldGeometry) -> str:
+    paper = centred_geometry(geometry.sensor)
+    if geometry.field == paper.field:
+        return f"field: {shape_text(geometry.field)} (the paper's)"
+    (ylo, yhi), (xlo, xhi) = geometry.support
+    ratio = geometry.voxels_per_band / paper.voxels_per_band
+    return (f"field: {shape_text(geometry.field)} instead of {shape_text(paper.field)} ({100 * ratio:.0f}% of the voxels; "
+            f"PSF support rows {ylo}…{yhi}, columns {xlo}…{xhi} from its centre)")
+
+
+def bands_line(filters: np.ndarray) -> str | None:
+    unseen = np.flatnonzero(~seen_bands(filters))
+    if not len(unseen):
+        return None
+    return f"bands: {len(unseen)} of {len(filters)} unseen by every filter ({', '.join(map(str, unseen[:8]))}" + \
+        ("…" if len(unseen) > 8 else "") + "): no FFTs for them"
+
+
+def terms_line(off: list[str]) -> str | None:
+    return f"terms: {', '.join(off)} (zero weight) not computed" if off else None
+
+
+def subspace_line(rank: int, n_bands: int, start: int, captured: float, reason: str) -> str:
+    if rank >= n_bands:
+        return f"subspace: none ({reason})"
+    return (f"subspace: {rank} spectral basis vectors instead of {n_bands} bands from iteration {start} "
+            f"({100 * captured:.3f}% of the iterate's energy; {reason})")
