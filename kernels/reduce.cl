@@ -72,13 +72,13 @@ __kernel void amax(__global ACC *partial, __local ACC *scratch, long n, long spa
     store_partial(partial, group_reduce(m, scratch, 1));
 }
 
-/* tv_norm: partial sums of tv_term (tv.cl) over x (K,H,W), n = K·H·W. */
+/* tv_norm: partial sums of tv_row (tv.cl) over the n = K·H rows of x (K,H,W). */
 __kernel void tv_norm(__global ACC *partial, __local ACC *scratch, long n, long span, long step, __global const REAL *x,
                       int K, int H, int W, ACC w0, ACC w1, ACC w2)
 {
     ACC s = 0, c = 0;
-    FOR_TERMS(i)
-        acc_add(&s, &c, tv_term(x, i, K, H, W, w0, w1, w2));
+    FOR_TERMS(row)
+        acc_add(&s, &c, tv_row(x, row, K, H, W, w0, w1, w2));
     store_partial(partial, group_reduce(s - c, scratch, 0));
 }
 

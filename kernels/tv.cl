@@ -12,92 +12,53 @@ __kernel void haar_tv(__global REAL *out, __global const REAL *x, int K, int H, 
     int xx = get_global_id(0), y = get_global_id(1), k = get_global_id(2);
     if (xx >= W || y >= H) return;
     size_t i = at3(k, y, xx, H, W), plane = (size_t)H * W;
+    /* Branch-free: a missing neighbour is replaced by the element itself, so its difference is 0 and
+     * clip(0) adds nothing; selects let PoCL vectorise across work items. */
     REAL v = x[i], t = 0;
     const REAL halve = 0.5;
     if (active & 1) {
-        if (k + 1 < K) t += clip_to((x[i + plane] - v) * halve, c0);
-        if (k > 0)     t -= clip_to((v - x[i - plane]) * halve, c0);
+        REAL next = x[k + 1 < K ? i + plane : i], prev = x[k > 0 ? i - plane : i];
+        t += clip_to((next - v) * halve, c0) - clip_to((v - prev) * halve, c0);
     }
     if (active & 2) {
-        if (y + 1 < H) t += clip_to((x[i + W] - v) * halve, c1);
-        if (y > 0)     t -= clip_to((v - x[i - W]) * halve, c1);
+        REAL next = x[y + 1 < H ? i + W : i], prev = x[y > 0 ? i - W : i];
+        t += clip_to((next - v) * halve, c1) - clip_to((v - prev) * halve, c1);
     }
     if (active & 4) {
-        if (xx + 1 < W) t += clip_to((x[i + 1] - v) * halve, c2);
-        if (xx > 0)     t -= clip_to((v - x[i - 1]) * halve, c2);
+        REAL next = x[xx + 1 < W ? i + 1 : i], prev = x[xx > 0 ? i - 1 : i];
+        t += clip_to((next - v) * halve, c2) - clip_to((v - prev) * halve, c2);
     }
     REAL result = t * scale + v;
     out[i] = nonneg && result < 0 ? (REAL)0 : result;
 }
 
-/* tv_term: the TV terms owned by element i = (k, y, x) of x (K,H,W):
- *   Σ_d w_d |x_{i+e_d} − x_i| over the axes (λ, y, x) with a forward neighbour (w_d = 0 skips d).
- * Summed over all i by the tv_norm reduction (reduce.cl) this is Σ_d w_d ‖∇_d x‖₁. */
-inline ACC tv_term(__global const REAL *x, size_t i, int K, int H, int W, ACC w0, ACC w1, ACC w2)
+/* sum_abs_diff: Σ_{i<n} |a[i] − b[i]| in ACC, four independent partial sums (a reduction the compiler may
+ * not reorder by itself, so this is what lets it use vector lanes). */
+inline ACC sum_abs_diff(__global const REAL *a, __global const REAL *b, int n)
 {
-    size_t plane = (size_t)H * W;
-    size_t k = i / plane, r = i - k * plane, y = r / W, xx = r - y * W;
-    REAL v = x[i];
+    ACC s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        s0 += (ACC)fabs(a[i] - b[i]);
+        s1 += (ACC)fabs(a[i + 1] - b[i + 1]);
+        s2 += (ACC)fabs(a[i + 2] - b[i + 2]);
+        s3 += (ACC)fabs(a[i + 3] - b[i + 3]);
+    }
+    for (; i < n; ++i) s0 += (ACC)fabs(a[i] - b[i]);
+    return (s0 + s1) + (s2 + s3);
+}
+
+/* tv_row: the TV terms owned by row (k, y) of x (K,H,W):
+ *   Σ_x Σ_d w_d |x_{i+e_d} − x_i| over the axes (λ, y, x) with a forward neighbour (w_d = 0 skips d).
+ * Summed over all K·H rows by the tv_norm reduction (reduce.cl) this is Σ_d w_d ‖∇_d x‖₁; one division
+ * per row. */
+inline ACC tv_row(__global const REAL *x, size_t row, int K, int H, int W, ACC w0, ACC w1, ACC w2)
+{
+    size_t k = row / H, y = row - k * H, plane = (size_t)H * W;
+    __global const REAL *r = x + row * W;
     ACC t = 0;
-    if (w0 > 0 && k + 1 < K)  t += w0 * (ACC)fabs(x[i + plane] - v);
-    if (w1 > 0 && y + 1 < H)  t += w1 * (ACC)fabs(x[i + W] - v);
-    if (w2 > 0 && xx + 1 < W) t += w2 * (ACC)fabs(x[i + 1] - v);
+    if (w2 > 0)              t += w2 * sum_abs_diff(r + 1, r, W - 1);
+    if (w1 > 0 && y + 1 < H) t += w1 * sum_abs_diff(r + W, r, W);
+    if (w0 > 0 && k + 1 < K) t += w0 * sum_abs_diff(r + plane, r, W);
     return t;
-}
-
-/* subspace_tv: c⁺ = Bᵀ·max(0, haar_tv(B·c)) for a cube in a spectral subspace: c (R,H,W) coefficients,
- * B (K,R) row-major with orthonormal columns (R ≤ SUBSPACE_MAX). One work item per pixel: it loads its
- * own and its four neighbours' coefficients, then walks the bands k, expanding v_k = Σ_j B[k,j]·c_j at
- * the pixel (a rolling window over k − 1, k, k + 1) and at the neighbours, applies the haar_tv step
- * (as haar_tv above, with max(·, 0)) and accumulates the projection c⁺_j += B[k,j]·out_k.
- * Grid (x, y, 1) over (H, W), rounded up; out must not alias c. */
-#define SUBSPACE_MAX 32
-inline REAL expand_at(__global const REAL *B, int k, int R, const REAL *coeffs)
-{
-    REAL v = 0;
-    for (int j = 0; j < R; ++j) v += B[k * R + j] * coeffs[j];
-    return v;
-}
-
-__kernel void subspace_tv(__global REAL *out, __global const REAL *c, __global const REAL *B, int K, int R,
-                          int H, int W, int active, REAL c0, REAL c1, REAL c2, REAL scale)
-{
-    int xx = get_global_id(0), y = get_global_id(1);
-    if (xx >= W || y >= H) return;
-    size_t plane = (size_t)H * W, i = (size_t)y * W + xx;
-    REAL own[SUBSPACE_MAX], up[SUBSPACE_MAX], down[SUBSPACE_MAX], left[SUBSPACE_MAX], right[SUBSPACE_MAX];
-    REAL acc[SUBSPACE_MAX];
-    int has_up = y > 0, has_down = y + 1 < H, has_left = xx > 0, has_right = xx + 1 < W;
-    for (int j = 0; j < R; ++j) {
-        size_t at = j * plane + i;
-        own[j] = c[at];
-        up[j] = has_up ? c[at - W] : 0;
-        down[j] = has_down ? c[at + W] : 0;
-        left[j] = has_left ? c[at - 1] : 0;
-        right[j] = has_right ? c[at + 1] : 0;
-        acc[j] = 0;
-    }
-    const REAL halve = 0.5;
-    REAL previous = 0, v = expand_at(B, 0, R, own);
-    for (int k = 0; k < K; ++k) {
-        REAL next = k + 1 < K ? expand_at(B, k + 1, R, own) : 0, t = 0;
-        if (active & 1) {
-            if (k + 1 < K) t += clip_to((next - v) * halve, c0);
-            if (k > 0)     t -= clip_to((v - previous) * halve, c0);
-        }
-        if (active & 2) {
-            if (has_down) t += clip_to((expand_at(B, k, R, down) - v) * halve, c1);
-            if (has_up)   t -= clip_to((v - expand_at(B, k, R, up)) * halve, c1);
-        }
-        if (active & 4) {
-            if (has_right) t += clip_to((expand_at(B, k, R, right) - v) * halve, c2);
-            if (has_left)  t -= clip_to((v - expand_at(B, k, R, left)) * halve, c2);
-        }
-        REAL result = t * scale + v;
-        result = result < 0 ? (REAL)0 : result;
-        for (int j = 0; j < R; ++j) acc[j] += B[k * R + j] * result;
-        previous = v;
-        v = next;
-    }
-    for (int j = 0; j < R; ++j) out[j * plane + i] = acc[j];
 }

@@ -137,12 +137,18 @@ class NumpyBackend:
         return out
 
     def extrapolate(self, x_new, x_old, beta, out=None):
-        """FISTA momentum: x⁺ + β(x⁺ − x)  (out may alias x_old, not x_new)."""
+        """FISTA momentum: x⁺ + β(x⁺ − x)  (out may alias x_old, not x_new); row blocks in parallel."""
         if out is None:
-            return x_new + beta * (x_new - x_old)
-        np.subtract(x_new, x_old, out=out)
-        out *= beta
-        out += x_new
+            out = np.empty_like(x_new)
+        new, old, target = (_as_rows(a) for a in (x_new, x_old, out))
+
+        def block(y0, y1, _scratch):
+            rows = target[:, y0:y1]
+            np.subtract(new[:, y0:y1], old[:, y0:y1], out=rows)
+            rows *= beta
+            rows += new[:, y0:y1]
+
+        map_blocks(block, new.shape[1], new.shape[0] * new.shape[2] * new.itemsize, self.workers)
         return out
 
     def vdot(self, x, y) -> float:
