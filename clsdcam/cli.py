@@ -30,6 +30,16 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise InputError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise InputError(f"{value} must be ≥ 0")
+    return value
+
+
 def _number(text: str) -> float:
     try:
         return float(text)
@@ -70,6 +80,12 @@ def add_solver_options(p: argparse.ArgumentParser):
                    help="TV weights along x, y and λ (default 1,1,1)")
     p.add_argument("--lowrank", type=_number, default=0.0, help="low-rank weight, relative to σ₁(Aᵀb) (default 0: off)")
     p.add_argument("--tol", type=_number, default=DEFAULT_TOL, help="stop when ‖Δx‖/‖x‖ < TOL (default: off)")
+    p.add_argument("--plateau", type=_number, default=0.0,
+                   help="stop when the objective fell by less than this (relative) over its last check (default: off)")
+    p.add_argument("--rank", type=_non_negative_int, default=0, metavar="R",
+                   help="solve for R spectral basis vectors instead of the bands (default 0: chosen automatically)")
+    p.add_argument("--no-skip", action="store_true",
+                   help="the full solver: the paper's 2H×2W field, every band, no spectral subspace")
     p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
     p.add_argument("--png", default=None, metavar="PREFIX", help="write pictures PREFIX_*.png")
     p.add_argument("--full-field", action="store_true", help="also write the whole padded field")
@@ -240,7 +256,8 @@ def settings(args):
     from .solver import Settings
 
     return Settings(iters=args.iters, tv=args.tv, tv_weights=args.tv_weights, lowrank=args.lowrank,
-                    tol=args.tol, dtype=args.dtype, full_field=args.full_field)
+                    tol=args.tol, plateau=args.plateau, rank=args.rank, skip=not args.no_skip, dtype=args.dtype,
+                    full_field=args.full_field)
 
 
 def _solve(args, calibration, measurement, snapshots=()):
@@ -286,7 +303,7 @@ class _progress_bar:
         return None if self.bar is None else self.update
 
     def update(self, record: dict):
-        fields = {"data": f"{record['data']:.4g}", "change": f"{record['change']:.2e}"}
+        fields = {"data": f"{record['data']:.4g}", "change": f"{record['change']:.2e}", "rank": record["rank"]}
         if record["objective"] == record["objective"]:  # not NaN
             self.last_objective = f"{record['objective']:.5g}"
         fields["objective"] = self.last_objective
@@ -310,6 +327,7 @@ def _report(args, result, output: Path):
     print(f"wrote {output}: cube {shape_text(result.cube.shape)}, {result.iterations} iterations "
           f"(stopped: {result.stop_reason}) in {seconds:.1f} s ({per_iteration:.3f} s/iteration) "
           f"on {result.attrs['backend']} [{result.attrs['device']}]")
+    print("skipped: " + result.attrs["skips"].replace("\n", "\n         "))
 
 
 def _print_accuracy(cube, truth, label=""):

@@ -40,7 +40,8 @@ class SkipReport:
         return 1.0 - self.done_work / self.full_work if self.full_work else 0.0
 
     def summary(self) -> str:
-        return "; ".join(self.lines + [f"FFT work saved: {100 * self.saved:.0f}%"])
+        """One skip per line, then the FFT work saved."""
+        return "\n".join(self.lines + [f"FFT work saved: {100 * self.saved:.0f}% (of the full solver's 2-D FFT voxels)"])
 
 
 def field_line(geometry: FieldGeometry) -> str:
