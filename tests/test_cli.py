@@ -62,13 +62,15 @@ def bad_cases(simulated, tmp_path):
         "unknown fft engine": [meas, "--calibration", cal, "--fft", "fftw"],
         "negative lowrank": [meas, "--calibration", cal, "--lowrank", "-0.1"],
         "truth of the wrong shape": [meas, "--calibration", cal, "--truth", cal],
+        "negative rank": [meas, "--calibration", cal, "--rank", "-2"],
+        "negative plateau": [meas, "--calibration", cal, "--plateau", "-1e-3"],
     }
 
 
 @pytest.mark.parametrize("case", ["missing calibration", "missing measurement", "nan measurement", "wrong shape",
                                   "negative tv", "zero iterations", "non-numeric tv", "unknown backend",
                                   "bad tv weights", "unknown device", "unknown fft engine", "negative lowrank",
-                                  "truth of the wrong shape"])
+                                  "truth of the wrong shape", "negative rank", "negative plateau"])
 def test_bad_input_exits_2_with_one_line_and_no_output(simulated, tmp_path, capsys, case):
     output = tmp_path / "out.h5"
     args = bad_cases(simulated, tmp_path)[case]
@@ -76,6 +78,22 @@ def test_bad_input_exits_2_with_one_line_and_no_output(simulated, tmp_path, caps
     err = capsys.readouterr().err.strip()
     assert err.startswith("clsdcam: error:") and "\n" not in err and "Traceback" not in err
     assert not output.exists() and not list(tmp_path.glob(".out.h5*"))
+
+
+def test_skip_options_reach_the_solver_and_the_report_is_printed(tmp_path, capsys):
+    """--no-skip is the full solver (paper field, every band); --rank forces the subspace; both say so."""
+    sim = tmp_path / "sim"
+    assert main(["simulate", str(sim), "--size", "32x40", "--bands", "16", "--scene", "leds"]) == 0
+    args = [str(sim / "measurement.npy"), "--calibration", str(sim / "calibration.h5"), "--quiet", "--iters", "20"]
+    assert main(["reconstruct", *args, "-o", str(tmp_path / "full.h5"), "--no-skip"]) == 0
+    assert "(the paper's)" in capsys.readouterr().out
+    assert main(["reconstruct", *args, "-o", str(tmp_path / "r2.h5"), "--rank", "2", "--plateau", "1e-12"]) == 0
+    printed = capsys.readouterr().out
+    assert "skipped:" in printed and "2 spectral basis vectors instead of 16 bands" in printed
+    with h5py.File(tmp_path / "full.h5", "r") as full, h5py.File(tmp_path / "r2.h5", "r") as fast:
+        assert tuple(full.attrs["field_shape"]) == (64, 80) and not full.attrs["skip"]
+        assert set(full["history/rank"][:]) == {16} and set(fast["history/rank"][10:]) == {2}
+        assert fast.attrs["rank"] == 2 and fast.attrs["plateau"] == 1e-12 and fast.attrs["fft_work_saved"] > 0
 
 
 def test_console_entry_point_reports_bad_input_without_traceback(tmp_path):

@@ -111,3 +111,26 @@ def test_ctrl_c_returns_the_best_iterate():
     assert result.stop_reason == "interrupted" and result.iterations == 24
     best = min(r["objective"] for r in result.history)
     assert problem.objective(result.x) == pytest.approx(best, rel=1e-12)
+
+
+def test_a_run_in_phases_through_an_identity_change_of_space_is_the_same_run():
+    """Fista.change_space keeps x, x_prev, y and t: phases joined by the identity reproduce one run exactly."""
+    from clsdcam.fista import Fista, Rules
+
+    problem = Quadratic(7, m=40, n=40, mu=1e-3)
+    whole = problem.run(iters=120, objective=problem.objective)
+    loop = Fista(BACKEND, np.zeros_like(problem.exact), step=1 / problem.lipschitz, objective=problem.objective,
+                 rules=Rules())
+    for _ in range(4):
+        assert loop.run(problem.gradient_step, problem.prox, 30) is None
+        loop.change_space(lambda a: a.copy(), 1 / problem.lipschitz, problem.objective)
+    assert loop.iterations == 120
+    np.testing.assert_array_equal(loop.x, whole.x)
+
+
+def test_fista_stops_on_an_objective_plateau():
+    problem = Quadratic(8)
+    result = problem.run(iters=5000, objective=problem.objective, plateau=1e-9)
+    assert result.stop_reason == "plateau" and 10 < result.iterations < 5000
+    checked = [r["objective"] for r in result.history if np.isfinite(r["objective"])]
+    assert checked[-2] - checked[-1] < 1e-9 * abs(checked[-1])
