@@ -40,3 +40,4 @@ __kernel void bandmix(__global REAL *out, __global const REAL *x, __global const
         out[k * P + p] = v;
     }
 }
+

@@ -20,3 +20,5 @@
 
 /* Flat index of (row, col) in a row-major plane stack: ((b*H + y)*W + x). */
 inline size_t at3(size_t b, size_t y, size_t x, size_t H, size_t W) { return (b * H + y) * W + x; }
+/* Clip v to [−c, c] (NaN propagates, as np.clip). */
+inline REAL clip_to(REAL v, REAL c) { return v < -c ? -c : (v > c ? c : v); }

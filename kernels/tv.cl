@@ -1,6 +1,3 @@
-/* Clip v to [−c, c] (NaN propagates, as np.clip). */
-inline REAL clip_to(REAL v, REAL c) { return v < -c ? -c : (v > c ? c : v); }
-
 /* haar_tv: one parallel-proximal Haar step of weighted anisotropic TV (Kamilov 2016),
  *   out_i = x_i + 1/(2D) Σ_d [clip((x_{i+e_d} − x_i)/2, ±c_d) − clip((x_i − x_{i−e_d})/2, ±c_d)]
  * over the D axes d (bit d of `active`; axes λ, y, x) with c_d = 2·D·τ·w_d; a missing neighbour adds 0;
@@ -62,3 +59,4 @@ inline ACC tv_row(__global const REAL *x, size_t row, int K, int H, int W, ACC w
     if (w0 > 0 && k + 1 < K) t += w0 * sum_abs_diff(r + plane, r, W);
     return t;
 }
+

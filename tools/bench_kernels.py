@@ -7,8 +7,10 @@
 The problem is the sensor H×W with the paper's 2H×2W field and K bands. Each row is the
 median of N timed runs after one warm-up, with queue.finish() before and after the timed
 part; "GB/s" is the minimum bytes read + written by the primitive divided by that time.
-"iteration" is one FISTA iteration through clsdcam.model/priors (forward, residual, adjoint,
-gradient step, TV prox + non-negativity, relative change, extrapolation).
+"forward" and "adjoint_step" are A and the fused gradient step y − s·Aᵀr through the backend's
+convolution (the host's chunked pocketfft pipeline on CPUs); "iteration" is one step of the solver's
+own FISTA loop on its band-space problem (forward, residual, fused adjoint step, TV prox with
+non-negativity, FISTA statistics, extrapolation); "subspace_tv" is the subspace prox at r = 3.
 """
 from __future__ import annotations
 
@@ -26,8 +28,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from clsdcam.backends.numpy import NumpyBackend  # noqa: E402
+from clsdcam.fista import Fista  # noqa: E402
+from clsdcam.geometry import transfer_function  # noqa: E402
 from clsdcam.model import ForwardModel  # noqa: E402
 from clsdcam.priors import Prox, Regularizer  # noqa: E402
+from clsdcam.problem import Problem as Objective  # noqa: E402
 
 
 def parse_args(argv=None):
@@ -69,26 +74,32 @@ def rows(be, p: Problem) -> dict:
     model = ForwardModel(be, p.psf, p.filters)
     x, y, out = be.to_device(p.cube), be.to_device(p.cube[::-1].copy()), be.empty(model.cube_shape)
     spectrum = be.fft2(x)
+    transfer = be.to_device(transfer_function(p.psf, model.geometry), complex_=True)
+    filters = be.to_device(p.filters)
     window = be.to_device(p.cube[:, :p.sensor[0], :p.sensor[1]])
     b, r = be.empty(p.sensor), be.to_device(np.ones(p.sensor))
-    prox = Prox(be, Regularizer(tv=1e-3), model.cube_shape)
     mix = np.eye(p.bands) * 0.5 + 0.5 / p.bands
+    basis = np.linalg.qr(np.random.default_rng(1).standard_normal((p.bands, 3)))[0]
+    coefficients, projected = be.to_device(p.cube[:3]), be.empty((3,) + p.field)
     offset = model.offset
-    state = iteration_state(be, model, p)
+    step = iteration(be, model, p)
     return {
         "fft2": (lambda: be.fft2(x, out=spectrum), n["F"] + n["S"]),
         "ifft2": (lambda: be.ifft2(spectrum, p.field, out=out), n["S"] + n["F"]),
-        "cmul": (lambda: be.cmul(spectrum, model.transfer, out=spectrum), 2 * n["S"]),
+        "cmul": (lambda: be.cmul(spectrum, transfer, out=spectrum), 2 * n["S"]),
         "pad": (lambda: be.pad(window, p.field, offset, out=out), n["f"] + n["F"]),
         "crop": (lambda: be.crop(x, p.sensor, offset, out=window), 2 * n["f"]),
-        "mask_sum": (lambda: be.mask_sum(model.filters, x, offset, out=b), 2 * n["f"] + n["s"]),
-        "mask_spread": (lambda: be.mask_spread(model.filters, r, p.field, offset, out=out), n["f"] + n["s"] + n["F"]),
+        "mask_sum": (lambda: be.mask_sum(filters, x, offset, out=b), 2 * n["f"] + n["s"]),
+        "mask_spread": (lambda: be.mask_spread(filters, r, p.field, offset, out=out), n["f"] + n["s"] + n["F"]),
         "scale": (lambda: be.scale(0.5, x, out=out), 2 * n["F"]),
         "axpy": (lambda: be.axpy(-0.1, x, y, out=out), 3 * n["F"]),
         "extrapolate": (lambda: be.extrapolate(x, y, 0.3, out=out), 3 * n["F"]),
         "nonneg": (lambda: be.nonneg(x, out=out), 2 * n["F"]),
         "soft": (lambda: be.soft(x, 0.1, out=out), 2 * n["F"]),
-        "haar_tv": (lambda: be.haar_tv(x, 1e-3, (1.0, 1.0, 1.0), out=out), 2 * n["F"]),
+        "haar_tv": (lambda: be.haar_tv(x, 1e-3, (1.0, 1.0, 1.0), out=out, nonneg=True), 2 * n["F"]),
+        "subspace_tv": (lambda: be.subspace_tv(coefficients, basis, 1e-3, (1.0, 1.0, 1.0), out=projected),
+                        2 * 3 * n["F"] // p.bands),
+        "fista_stats": (lambda: be.fista_stats(x, y, out), 3 * n["F"]),
         "vdot": (lambda: be.vdot(x, y), 2 * n["F"]),
         "amax": (lambda: be.amax(x), n["F"]),
         "l1_norm": (lambda: be.l1_norm(x), n["F"]),
@@ -96,29 +107,17 @@ def rows(be, p: Problem) -> dict:
         "gram": (lambda: be.gram(x), n["F"]),
         "bandmix": (lambda: be.bandmix(x, mix, out=out), 2 * n["F"]),
         "forward": (lambda: model.forward(x, out=b), 0),
-        "adjoint": (lambda: model.adjoint(r, out=out), 0),
-        "iteration": (lambda: one_iteration(be, model, prox, state), 0),
+        "adjoint_step": (lambda: model.adjoint(r, out=out, y=y, step=0.1), 0),
+        "iteration": (step, 0),
     }
 
 
-def iteration_state(be, model, p: Problem) -> dict:
-    cube = p.cube * 0.01
-    return {"b": be.to_device(np.ones(p.sensor)), "r": be.empty(p.sensor), "x": be.to_device(cube),
-            "x_prev": be.to_device(cube), "y": be.to_device(cube), "z": be.empty(model.cube_shape), "L": 1e3}
-
-
-def one_iteration(be, model, prox, s):
-    """One FISTA iteration as fista.fista + Solver._gradient_step run it."""
-    model.forward(s["y"], out=s["r"])
-    be.axpy(-1.0, s["b"], s["r"], out=s["r"])
-    be.vdot(s["r"], s["r"])
-    model.adjoint(s["r"], out=s["z"])
-    be.axpy(-1.0 / s["L"], s["z"], s["y"], out=s["z"])
-    s["x"], s["x_prev"] = s["x_prev"], s["x"]
-    prox(s["z"], 1.0 / s["L"], s["x"])
-    be.axpy(-1.0, s["x_prev"], s["x"], out=s["z"])
-    be.vdot(s["x"], s["x"]), be.vdot(s["z"], s["z"])
-    be.extrapolate(s["x"], s["x_prev"], 0.5, out=s["y"])
+def iteration(be, model, p: Problem):
+    """One step of the solver's FISTA loop on its band-space problem (TV prox, no objective checks)."""
+    prox = Prox(be, Regularizer(tv=1e-3), model.cube_shape)
+    objective = Objective(model, be.to_device(np.ones(p.sensor)), prox, lambda x: 0.0, p.bands)
+    loop = Fista(be, be.to_device(p.cube * 0.01), step=1e-3)
+    return lambda: loop.run(objective.gradient_step, objective.prox, 1)
 
 
 def median_seconds(run, finish, repeat: int) -> float:

@@ -54,7 +54,7 @@ class OpenCLBackend:
         self.allocator = HostBuffers(self.context) if self.device.type & cl.device_type.CPU else None
         self.fft = make_fft(self.queue, fft or "auto", self.dtype, self.kernels)
         self.fft_engine = self.fft.name
-        self._band_cubes: dict = {}       # shape -> work cubes of subspace_tv
+        self._band_cubes: dict = {}       # shape -> the band cubes of subspace_tv
 
     # ---- memory -------------------------------------------------------------------------
     def to_device(self, host, complex_: bool = False):
@@ -191,13 +191,9 @@ class OpenCLBackend:
             c_d = 2·D·τ·w_d over the D axes with w_d > 0; one kernel, one pass.
         """
         k, h, w = x.shape
-        active = [wd > 0 for wd in weights]
-        d = sum(active)
-        limits = [self._real(2.0 * d * tau * wd if on else 0.0) for wd, on in zip(weights, active)]
-        mask = np.int32(sum(1 << axis for axis, on in enumerate(active) if on))
+        limits, mask, scale = self._haar_constants(tau, weights)
         target = self.empty(x.shape) if out is not None and _same_buffer(out, x) else self._out(out, x.shape, x.dtype)
-        self.kernels.grid3("haar_tv", x.shape, target, x, *_ints(k, h, w), mask, *limits,
-                           self._real(1.0 / (2 * d) if d else 0.0), np.int32(bool(nonneg)))
+        self.kernels.grid3("haar_tv", x.shape, target, x, *_ints(k, h, w), mask, *limits, scale, np.int32(bool(nonneg)))
         return self.copy(target, out) if target is not out and out is not None else target
 
     def tv_norm(self, x, weights) -> float:
@@ -239,9 +235,8 @@ class OpenCLBackend:
         return self.copy(target, out) if target is not out and out is not None else target
 
     def subspace_tv(self, c, basis, tau, weights, out=None):
-        """c⁺ = Bᵀ·max(0, haar_tv(B·c)) (see NumpyBackend.subspace_tv): expand, the fused haar_tv and
-        project, through a band cube kept per shape (three passes; PoCL runs them faster than one fused
-        kernel with private per-pixel spectra)."""
+        """c⁺ = Bᵀ·max(0, haar_tv(B·c)) (see NumpyBackend.subspace_tv): expand, the fused haar_tv and project,
+        through band cubes kept per shape (on PoCL this beat single kernels that expand where they read)."""
         shape = (basis.shape[0],) + tuple(c.shape[1:])
         if shape not in self._band_cubes:
             self._band_cubes[shape] = (self.empty(shape), self.empty(shape))
@@ -249,6 +244,14 @@ class OpenCLBackend:
         self.bandmix(c, basis, out=expanded)
         self.haar_tv(expanded, tau, weights, out=stepped, nonneg=True)
         return self.bandmix(stepped, np.transpose(basis), out=out)
+
+    def _haar_constants(self, tau, weights):
+        """(clip bounds c_d = 2·D·τ·w_d per axis, bit mask of the active axes, 1/(2D)) in the kernels' types."""
+        active = [wd > 0 for wd in weights]
+        d = sum(active)
+        limits = [self._real(2.0 * d * tau * wd if on else 0.0) for wd, on in zip(weights, active)]
+        mask = np.int32(sum(1 << axis for axis, on in enumerate(active) if on))
+        return limits, mask, self._real(1.0 / (2 * d) if d else 0.0)
 
     # ---- helpers ------------------------------------------------------------------------
     def _map(self, name: str, like, out, *args):

@@ -1,0 +1,169 @@
+#!/usr/bin/env python3
+"""Seconds per FISTA iteration at full size: every configuration in one run, repeats interleaved, medians.
+
+    python tools/bench_iteration.py --size 320x448 --bands 64 --repeat 3 --json iteration.json
+
+Rows: the authors' published algorithm (tools/authors_baseline.py), clsdcam on NumPy and on OpenCL
+as the full solver (``--no-skip``: the paper's 2H × 2W field, every band), with the support-sized
+field in band space, and in spectral subspaces of forced ranks; and the FFT floor as the issue
+defines it, the 4·K real 2-D transforms an iteration needs (2 rfft2 + 2 irfft2 of K bands, pocketfft
+on all cores, the faster of one batched call and cache-sized chunks), at the paper's field and at
+the solver's own field. A clsdcam row is the time between two iterations of a solve, over 20
+steady-state iterations (so it includes its two objective checks); set-up is not in it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.fft
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from authors_baseline import AuthorsSolver  # noqa: E402
+
+from clsdcam.backends.host_convolution import CHUNK_BYTES  # noqa: E402
+from clsdcam.phases import WARMUP  # noqa: E402
+from clsdcam.sim import simulate  # noqa: E402
+from clsdcam.solver import Settings, Solver  # noqa: E402
+
+WINDOW = 20     # steady-state iterations timed per solve
+AUTHORS = "authors (complex128, as published)"
+PAPER, OWN = "paper field", "solver's field"
+
+
+def configurations(bands: int, ranks, backends) -> dict:
+    """name -> (backend, Settings fields, first timed iteration)."""
+    configs = {}
+    for backend in backends:
+        configs[f"{backend} full solver (--no-skip)"] = (backend, {"skip": False}, 1)
+        configs[f"{backend} support field, {bands} bands"] = (backend, {"rank": bands}, 1)
+        for rank in ranks:
+            configs[f"{backend} subspace r = {rank}"] = (backend, {"rank": rank}, WARMUP + 1)
+    return configs
+
+
+def clsdcam_timer(sim, backend: str, fields: dict, first: int):
+    """A function timing one solve's steady-state seconds per iteration (the solver is built once)."""
+    solver = Solver(sim.calibration, backend=backend, settings=Settings(iters=first + WINDOW, **fields))
+
+    def seconds_per_iteration() -> float:
+        seconds = [r["seconds"] for r in solver.solve(sim.measurement).history]
+        return (seconds[first + WINDOW - 1] - seconds[first - 1]) / WINDOW
+
+    return solver, seconds_per_iteration
+
+
+def authors_timer(sim):
+    """Seconds of the authors' second iteration (the first allocates)."""
+    authors = AuthorsSolver(sim.calibration.psf, sim.calibration.filters)
+
+    def seconds_per_iteration() -> float:
+        marks = [time.perf_counter()] + [time.perf_counter() for _ in authors.run(sim.measurement, 2)]
+        return marks[2] - marks[1]
+
+    return seconds_per_iteration
+
+
+def floor_timer(bands: int, field):
+    """A function timing 2 rfft2 + 2 irfft2 of a (K, Hp, Wp) float32 cube: the faster of batched and chunked calls."""
+    cube = np.random.default_rng(0).random((bands,) + tuple(field), dtype=np.float32)
+    spectrum = scipy.fft.rfft2(cube, workers=-1)
+    per = max(1, CHUNK_BYTES // (spectrum[0].nbytes))
+
+    def batched():
+        scipy.fft.rfft2(cube, workers=-1)
+        scipy.fft.irfft2(spectrum, s=field, workers=-1)
+
+    def chunked():
+        for k in range(0, bands, per):
+            scipy.fft.rfft2(cube[k:k + per], workers=-1)
+            scipy.fft.irfft2(spectrum[k:k + per], s=field, workers=-1)
+
+    return lambda: 2 * min(_seconds(batched), _seconds(chunked))
+
+
+def _seconds(run) -> float:
+    start = time.perf_counter()
+    run()
+    return time.perf_counter() - start
+
+
+def measure(args) -> dict:
+    shape = tuple(int(v) for v in args.size.split("x"))
+    sim = simulate(scene="target", shape=shape, n_bands=args.bands, seed=0)
+    backends = [b for b in args.backends.split(",") if b]
+    timers, fields, devices = {}, {}, set()
+    for name, (backend, settings, first) in configurations(args.bands, args.ranks, backends).items():
+        solver, timers[name] = clsdcam_timer(sim, backend, settings, first)
+        fields[name] = list(solver.geometry.field)
+        devices.add(f"{backend}: {solver.backend.device_name} (FFT {solver.backend.fft_engine})")
+    if not args.no_authors:
+        timers[AUTHORS] = authors_timer(sim)
+    own_field = next(tuple(f) for n, f in fields.items() if "support field" in n)
+    timers[PAPER] = floor_timer(args.bands, tuple(2 * s for s in shape))
+    timers[OWN] = floor_timer(args.bands, own_field)
+    samples = {name: [] for name in timers}
+    for repeat in range(args.repeat):           # interleaved: every configuration once per round
+        for name, timer in timers.items():
+            samples[name].append(timer())
+        print(f"round {repeat + 1}/{args.repeat} done", file=sys.stderr)
+    seconds = {name: float(np.median(v)) for name, v in samples.items()}
+    floors = {name: seconds.pop(name) for name in (PAPER, OWN)}
+    return {"size": shape, "bands": args.bands, "repeat": args.repeat, "fields": fields, "devices": sorted(devices),
+            "seconds": seconds, "samples": samples, "fft_floor": floors}
+
+
+def table(result: dict) -> str:
+    seconds, floors = result["seconds"], result["fft_floor"]
+    authors = seconds.get(AUTHORS)
+    lines = [f"| per iteration, {result['bands']}×{result['size'][0]}×{result['size'][1]} | field | seconds "
+             f"(median, min–max of {result['repeat']}) | vs authors | vs FFT floor, paper field | vs FFT floor, own field |",
+             "|---|---|---:|---:|---:|---:|"]
+    for name, sec in seconds.items():
+        field = "×".join(map(str, result["fields"].get(name, ()))) or "paper"
+        versus = f"{authors / sec:.1f}×" if authors else "—"
+        floor_ratios = "— | —" if name == AUTHORS else f"{sec / floors[PAPER]:.2f} | {sec / floors[OWN]:.2f}"
+        lines.append(f"| {name} | {field} | {sec:.3f} ({_spread(result['samples'][name])}) | {versus} | {floor_ratios} |")
+    lines += [f"| FFT floor, {name} (4·K transforms) | | {sec:.3f} ({_spread(result['samples'][name])}) | | | |"
+              for name, sec in floors.items()]
+    return "\n".join(lines) + "\n\ndevices: " + "; ".join(result["devices"]) + ratio_lines(seconds)
+
+
+def _spread(samples) -> str:
+    return f"{min(samples):.3f}–{max(samples):.3f}"
+
+
+def ratio_lines(seconds: dict) -> str:
+    """OpenCL / NumPy for each mode measured on both."""
+    out = []
+    for name, sec in seconds.items():
+        twin = name.replace("numpy", "opencl", 1)
+        if name.startswith("numpy") and twin in seconds:
+            out.append(f"opencl / numpy, {name[6:]}: {seconds[twin] / sec:.2f}")
+    return "\n" + "\n".join(out) if out else ""
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--size", default="320x448")
+    parser.add_argument("--bands", type=int, default=64)
+    parser.add_argument("--ranks", type=lambda t: [int(v) for v in t.split(",")], default=[3, 8])
+    parser.add_argument("--backends", default="numpy,opencl")
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--no-authors", action="store_true", help="leave out the authors' algorithm (17 s/iteration)")
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args(argv)
+    result = measure(args)
+    print(table(result))
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
