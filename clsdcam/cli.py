@@ -20,24 +20,23 @@ class _Parser(argparse.ArgumentParser):
         raise InputError(message)
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise InputError(f"{text!r} is not an integer") from None
-    if value < 1:
-        raise InputError(f"{value} must be ≥ 1")
-    return value
+def _integer_at_least(minimum: int, name: str):
+    """An argparse type: an integer ≥ ``minimum`` (argparse names it ``name`` in its one-line error)."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise InputError(f"{text!r} is not an integer") from None
+        if value < minimum:
+            raise InputError(f"{value} must be ≥ {minimum}")
+        return value
+
+    parse.__name__ = name
+    return parse
 
 
-def _non_negative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise InputError(f"{text!r} is not an integer") from None
-    if value < 0:
-        raise InputError(f"{value} must be ≥ 0")
-    return value
+_positive_int = _integer_at_least(1, "positive integer")
+_non_negative_int = _integer_at_least(0, "non-negative integer")
 
 
 def _number(text: str) -> float:

@@ -140,7 +140,7 @@ class Phases:
 
     def _subspace_problem(self, basis: np.ndarray) -> Problem:
         sub = SpectralSubspace(self.solver.model, basis, self.regularizer, self.solver.calibration.filters)
-        return Problem(sub.model, self.solver._b, sub.prox, sub.penalty, sub.rank, expand=sub.expand, subspace=sub)
+        return Problem(sub.model, self.solver.b, sub.prox, sub.penalty, sub.rank, subspace=sub)
 
     def _step(self, lipschitz: float) -> float:
         """The step for a space of Lipschitz constant L: the loop's current step·L (step_scale, halved by any

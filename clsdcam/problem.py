@@ -12,17 +12,16 @@ from typing import Callable
 
 
 class Problem:
-    """The data term through ``model`` and the prior through ``prox`` / ``penalty``, for one normalised b."""
+    """The data term through ``model`` and the prior through ``prox`` / ``penalty``, for one normalised b;
+    ``subspace`` (a :class:`~clsdcam.subspace.SpectralSubspace`) when x holds its coefficients."""
 
-    def __init__(self, model, b, prox: Callable, penalty: Callable, rank: int, expand: Callable | None = None,
-                 subspace=None):
+    def __init__(self, model, b, prox: Callable, penalty: Callable, rank: int, subspace=None):
         self.model = model
         self.backend = model.backend
         self.b = b
         self.prox_into = prox
         self.penalty = penalty
         self.rank = rank
-        self.expand = expand
         self.subspace = subspace
         self.residual_buffer = self.backend.empty(model.sensor_shape)
 
@@ -51,14 +50,14 @@ class Problem:
 
     def to_field(self, x):
         """The band cube E·x (x itself in band space)."""
-        return x if self.expand is None else self.expand(x)
+        return x if self.subspace is None else self.subspace.expand(x)
 
     def solution(self, x):
         """The band cube of iterate x as a solution: E·x, projected onto v ≥ 0 (B·c can dip below 0 where
         the prox's max(0, ·) was followed by the projection onto the basis)."""
-        if self.expand is None:
+        if self.subspace is None:
             return x
-        cube = self.expand(x)
+        cube = self.subspace.expand(x)
         return self.backend.nonneg(cube, out=cube)
 
     def transforms(self) -> int:

@@ -115,7 +115,7 @@ class Solver:
         self.model = ForwardModel(self.backend, calibration.psf, calibration.filters, geometry=self.geometry,
                                   skip_unseen=self.settings.skip)
         self.lipschitz = self.model.lipschitz()
-        self._b = None
+        self.b = None          # the measurement being solved, divided by max|b|, on the device
 
     def solve(self, measurement: np.ndarray, x0: np.ndarray | None = None,
               progress: Callable[[dict], None] | None = None, snapshots=()) -> Result:
@@ -130,7 +130,7 @@ class Solver:
         if scale == 0.0:
             return self._result(self.model.embed(np.zeros(self._cube_window_shape())), 1.0, [], "zero measurement")
         be, s = self.backend, self.settings
-        self._b = be.to_device(b / scale)
+        self.b = be.to_device(b / scale)
         regularizer = self._regularizer()
         problem = self.band_problem(regularizer)
         loop = Fista(be, self._start(x0, scale), step=s.step_scale / self.lipschitz, objective=problem.objective,
@@ -147,7 +147,7 @@ class Solver:
     def band_problem(self, regularizer: Regularizer) -> Problem:
         """The problem on the band cube (the full problem)."""
         prox = Prox(self.backend, regularizer, self.model.cube_shape)
-        return Problem(self.model, self._b, prox, lambda x: regularizer.value(self.backend, x), self.model.n_bands)
+        return Problem(self.model, self.b, prox, lambda x: regularizer.value(self.backend, x), self.model.n_bands)
 
     # ---- pieces -------------------------------------------------------------------------
     def _check_memory(self):
@@ -183,7 +183,7 @@ class Solver:
     def _regularizer(self) -> Regularizer:
         """Absolute weights: τ₁, τ₃ times ‖Aᵀb‖_∞ and τ₂ times σ₁(Aᵀb), for the normalised b."""
         s, be = self.settings, self.backend
-        atb = self.model.adjoint(self._b)
+        atb = self.model.adjoint(self.b)
         data_scale = be.amax(atb)
         sigma1 = float(singular_values(be, atb).max()) if s.lowrank > 0 else 0.0
         return Regularizer(tv=s.tv * data_scale, tv_weights=s.tv_weights, lowrank=s.lowrank * sigma1,

@@ -259,6 +259,36 @@ def test_convolution_with_unseen_bands_and_fused_step(engine):
     assert relative_error(be.to_host(step), ref.adjoint(r, np.empty_like(v), y, 0.4)) <= tolerance
 
 
+@pytest.mark.parametrize("host_subspace", [True, False])
+@pytest.mark.parametrize("weights", [(1.0, 1.0, 1.0), (0.0, 0.5, 2.0)])
+def test_subspace_tv_on_both_paths(host_subspace, weights):
+    """The subspace prox through the host code on mapped buffers (CPU devices' default) and through the
+    kernels (expand, haar_tv, project: other devices), whichever this device uses by default."""
+    be, ref = opencl("float32"), NumpyBackend("float32")
+    a = inputs("float32", seed=4)
+    default, be.host_subspace = be.host_subspace, host_subspace
+    try:
+        got = be.to_host(be.subspace_tv(be.to_device(a["field"]), a["basis"], 0.05, weights))
+    finally:
+        be.host_subspace = default
+    # float32 sums of r and K products in another order than BLAS: a few ulps of the largest term
+    assert relative_error(got, ref.subspace_tv(a["field"], a["basis"], 0.05, weights)) <= 10 * ELEMENTWISE
+
+
+def test_host_buffers_are_released_only_at_a_sync_point_once_unused():
+    """CPU devices: a buffer over NumPy memory outlives its last user until the queue drains."""
+    be = opencl("float32")
+    if be.allocator is None:
+        pytest.skip("device memory of its own: the driver owns it")
+    be.allocator.drained()
+    held = len(be.allocator)
+    kept, dropped = be.to_device(np.ones(64, np.float32)), be.to_device(np.ones(64, np.float32))
+    del dropped
+    assert len(be.allocator) == held + 2                       # not yet: no sync point since
+    assert be.vdot(kept, kept) == 64.0                         # a blocking read drains the queue
+    assert len(be.allocator) == held + 1 and be.to_host(kept).sum() == 64.0
+
+
 def test_dropped_temporaries_do_not_corrupt_later_results():
     """A device input dropped right after its kernel is queued (its host memory is ours on CPU devices) keeps
     its memory until the queue drains: mixes of temporaries stay exact, call after call."""

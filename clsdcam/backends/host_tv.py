@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .blocks import scratch_buffer as buffer
+from .blocks import map_blocks, scratch_buffer as buffer
 
 
 def haar_limits(tau: float, weights) -> tuple[list, float]:
@@ -93,3 +93,28 @@ def tv_block_norm(xh: np.ndarray, top: int, n: int, weights) -> float:
     parts = [(weights[0], core[1:] - core[:-1]), (weights[1], xh[:, top + 1:top + 1 + below] - core[:, :below]),
              (weights[2], core[..., 1:] - core[..., :-1])]
     return float(sum(wd * np.abs(diff).sum(dtype=np.float64) for wd, diff in parts if wd > 0))
+
+
+def subspace_tv_blocks(c: np.ndarray, basis: np.ndarray, tau: float, weights, out: np.ndarray, workers: int):
+    """out = Bᵀ·max(0, haar_tv(B·c)) block by block: a block's coefficients (with halo rows) are expanded
+    to its K bands, stepped, clipped at 0 and projected, all in cache. ``out`` must not alias ``c``."""
+    limits, scale = haar_limits(tau, weights)
+    r, h, w = c.shape
+    basis = np.ascontiguousarray(basis, dtype=c.dtype)
+    k = basis.shape[0]
+
+    def block(y0, y1, scratch):
+        top, bottom = halo(h, y0, y1)
+        rows = y1 - y0 + top + bottom
+        coefficients = buffer(scratch, "coefficients", (r, rows * w), c.dtype)
+        coefficients.reshape(r, rows, w)[...] = c[:, y0 - top:y1 + bottom]
+        expanded = buffer(scratch, "expanded", (k, rows * w), c.dtype)
+        np.matmul(basis, coefficients, out=expanded)                          # v = B·c
+        step = haar_block(expanded.reshape(k, rows, w), top, y1 - y0, limits, scale, scratch)
+        np.clip(step, 0, None, out=step)
+        projected = buffer(scratch, "projected", (r, (y1 - y0) * w), c.dtype)
+        np.matmul(basis.T, step.reshape(k, -1), out=projected)                # c⁺ = Bᵀ·max(0, ·)
+        out[:, y0:y1] = projected.reshape(r, y1 - y0, w)
+
+    map_blocks(block, h, k * w * c.itemsize, workers)
+    return out

@@ -15,7 +15,7 @@ import scipy.fft
 from ..errors import InputError
 from .blocks import map_blocks, scratch_buffer
 from .host_convolution import HostConvolution
-from .host_tv import haar_block, haar_limits, halo, tv_block_norm
+from .host_tv import haar_block, haar_limits, halo, subspace_tv_blocks, tv_block_norm
 
 VDOT_ROW = 8192   # products per float32 partial sum in vdot
 COMPLEX_OF = {np.dtype(np.float32): np.dtype(np.complex64), np.dtype(np.float64): np.dtype(np.complex128)}
@@ -236,27 +236,9 @@ class NumpyBackend:
     def subspace_tv(self, c, basis, tau, weights, out=None):
         """c⁺ = Bᵀ·max(0, haar_tv(B·c)): the TV prox and projection in band space for a cube in a spectral
         subspace (c (r, H, W) coefficients, B (K, r) orthonormal columns), on row blocks: each block's
-        K-band expansion lives only in cache."""
-        limits, scale = haar_limits(tau, weights)
-        r, h, w = c.shape
-        basis = np.ascontiguousarray(basis, dtype=self.dtype)
-        k = basis.shape[0]
+        K-band expansion lives only in cache (backends/host_tv.py)."""
         target = out if out is not None and not np.shares_memory(out, c) else np.empty_like(c)
-
-        def block(y0, y1, scratch):
-            top, bottom = halo(h, y0, y1)
-            rows = y1 - y0 + top + bottom
-            coefficients = scratch_buffer(scratch, "coefficients", (r, rows * w), c.dtype)
-            coefficients.reshape(r, rows, w)[...] = c[:, y0 - top:y1 + bottom]
-            expanded = scratch_buffer(scratch, "expanded", (k, rows * w), c.dtype)
-            np.matmul(basis, coefficients, out=expanded)                          # v = B·c
-            step = haar_block(expanded.reshape(k, rows, w), top, y1 - y0, limits, scale, scratch)
-            np.clip(step, 0, None, out=step)
-            projected = scratch_buffer(scratch, "projected", (r, (y1 - y0) * w), c.dtype)
-            np.matmul(basis.T, step.reshape(k, -1), out=projected)                # c⁺ = Bᵀ·max(0, ·)
-            target[:, y0:y1] = projected.reshape(r, y1 - y0, w)
-
-        map_blocks(block, h, k * w * c.itemsize, self.workers)
+        subspace_tv_blocks(c, basis, tau, weights, target, self.workers)
         return _result(out, target) if target is not out else out
 
 
