@@ -71,15 +71,21 @@ class ForwardModel:
         """The sensor-sized window of a device field cube, on the host: (K, H, W)."""
         return self.backend.to_host(self.backend.crop(v, self.sensor_shape, self.offset))
 
-    def lipschitz(self, margin: float = 1.01, iters: int = POWER_ITERS, tol: float = POWER_TOL) -> float:
-        """L ≈ margin · λmax(AᵀA) by power iteration from a flat start (the DC mode dominates).
+    def lipschitz(self, margin: float = 1.01, iters: int = POWER_ITERS, tol: float = POWER_TOL, start=None) -> float:
+        """L ≈ margin · λmax(AᵀA) by power iteration from the flat cube (the DC mode dominates), plus ``start``
+        when given (a unit device cube near the dominant vector, e.g. a related model's: the flat part keeps
+        every direction in play).
 
         λ_j = ⟨v, AᵀAv⟩ / ⟨v, v⟩,  v ← AᵀAv / ‖AᵀAv‖, until λ moves less than ``tol`` (relative);
         the Rayleigh quotient is a lower bound, hence the small safety margin (the solver's
-        step back-off catches the rest).
+        step back-off catches the rest). The last v is kept in ``power_vector`` (to start a
+        related model's iteration from it).
         """
         be = self.backend
-        v = be.to_device(np.full(self.cube_shape, 1.0 / np.sqrt(np.prod(self.cube_shape))))
+        flat = np.full(self.cube_shape, 1.0 / np.sqrt(np.prod(self.cube_shape)))
+        v = be.to_device(flat)
+        if start is not None:
+            be.axpy(1.0, start, v, out=v)
         w = be.empty(self.cube_shape)
         b = be.empty(self.sensor_shape)
         eigenvalue = 0.0
@@ -90,4 +96,5 @@ class ForwardModel:
             if norm == 0.0 or abs(eigenvalue - previous) <= tol * eigenvalue:
                 break
             be.scale(1.0 / norm, w, out=v)
+        self.power_vector = v
         return margin * eigenvalue

@@ -140,6 +140,7 @@ class Solver:
                                                    terms_line(regularizer.inactive_terms())) if line]
         phases = Phases(self, loop, tracker, regularizer)
         reason, problem = phases.run(problem, warm_started=x0 is not None)
+        tracker.report.lines += [line for line in (phases.refreshes_line(),) if line]
         out = self._result(problem.solution(loop.x), scale, loop.history, reason, regularizer, loop.step, tracker)
         out.snapshots = tracker.kept
         return out

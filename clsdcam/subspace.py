@@ -48,13 +48,14 @@ class Spectra:
 class SpectralSubspace:
     """A, the prox and the objective for cubes v = B·c, on one backend; built once per basis."""
 
-    def __init__(self, model, basis: np.ndarray, regularizer: Regularizer, filters: np.ndarray):
+    def __init__(self, model, basis: np.ndarray, regularizer: Regularizer, filters: np.ndarray, start=None):
+        """``start``: a coefficient cube to begin the power iteration for L from (a related basis's)."""
         be = self.backend = model.backend
         self.basis = np.asarray(basis, dtype=np.float64)
         self.rank = self.basis.shape[1]
         self.full_model = model
         self.model = model.with_filters(np.einsum("kj,khw->jhw", self.basis, filters).astype(be.dtype))
-        self.lipschitz = self.model.lipschitz()
+        self.lipschitz = self.model.lipschitz(start=start)
         self.regularizer = regularizer
         self.cube_shape = self.model.cube_shape
         self._expanded = be.empty(model.cube_shape)
