@@ -5,8 +5,9 @@
    the fewest directions holding all but ``START_TAIL`` of x's energy (or ``--rank R``). If that
    is more than K/2 vectors the subspace would not pay, and the solve stays in band space.
    FISTA moves onto the basis (c = Bᵀx) and goes on with A·B (4r FFTs per iteration).
-3. Every ``CHECK_EVERY`` iterations (automatic rank only), one full-space proximal-gradient step
-   from v = B·c, x⁺ = prox(v − ∇f(v)/L), says whether the basis is right:
+3. Every ``CHECK_EVERY`` iterations, one full-space proximal-gradient step from v = B·c,
+   x⁺ = prox(v − ∇f(v)/L), says whether the basis is right (with ``--rank R`` only the second
+   answer applies: r stays R):
    - when it lowers the data term ½‖Av − b‖² by more than ``WIDEN_GAIN`` (relative), the
      measurement holds spectral content the basis cannot represent: the basis grows by the
      leading spectral directions of x⁺'s part outside it (doubling r), losslessly (FISTA keeps its
@@ -102,7 +103,7 @@ class Phases:
                 problem = self._enter_subspace(problem)
         while loop.iterations < iters:
             left = iters - loop.iterations
-            checking = problem.subspace is not None and not self.settings.rank
+            checking = problem.subspace is not None
             reason = self._run(problem, min(CHECK_EVERY, left) if checking else left)
             if reason:
                 return reason, problem
@@ -176,7 +177,7 @@ class Phases:
         stepped = full.prox(gradient_step, self._cube("stepped"), step)
         gain = (data - full.data(stepped)) / data if data > 0 else 0.0
         self.tracker.count(problem.transforms() // 2 + full.transforms())      # A·B·c, then Aᵀr and A·x⁺
-        if gain <= WIDEN_GAIN:
+        if gain <= WIDEN_GAIN or self.settings.rank:
             return self._move(sub, Spectra.of(be, stepped).basis(sub.rank))     # same rank, better spectra
         rank = min(2 * sub.rank, self.n_bands)
         if rank > self.n_bands * MAX_RANK_FRACTION:

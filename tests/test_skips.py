@@ -27,6 +27,15 @@ def test_default_solves_three_led_spectra_in_a_small_subspace_at_least_as_well(l
     assert fast.cube.min() >= 0
 
 
+def test_the_basis_follows_the_full_problem_when_no_widening_is_needed(leds):
+    """Checks that do not widen re-estimate the basis at the same rank, so the subspace does not freeze the
+    warm-up's spectra: a longer solve keeps improving (and stays at least as good as the full solver)."""
+    short, long = solve(leds, iters=100), solve(leds, iters=300)
+    assert "re-estimated from a full step" in long.attrs["skips"]
+    assert psnr(long.cube, leds.truth) > psnr(short.cube, leds.truth)
+    assert psnr(long.cube, leds.truth) >= psnr(solve(leds, iters=300, skip=False).cube, leds.truth) - 0.2
+
+
 def test_full_solver_uses_the_paper_field_and_every_band(leds):
     result = solve(leds, iters=12, skip=False)
     assert tuple(result.attrs["field_shape"]) == (96, 128)
