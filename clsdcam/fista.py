@@ -15,9 +15,12 @@ Three safeguards, each recorded in the history:
 * monotone checkpoints (as MFISTA): every ``objective_every`` iterations F(x) is evaluated;
   the best iterate is kept, and a rise (beyond round-off, 64·eps·|F|) sends the iterates
   back to it with t ← 1, so the recorded objective never increases;
-* step back-off: a non-finite value, a data term f(y) above 10³·F(best), or a rise right
-  after such a restart (impossible for a step ≤ 1/L, since a proximal-gradient step from
-  the best point then decreases F) halves the step before going back to the best iterate.
+* step back-off: a non-finite value, a data term f(y) above 10³·F(best), or a checkpoint right
+  after a rollback that does not lower F beyond round-off halves the step before going back
+  to the best iterate. From the best point with t = 1, a step ≤ 1/L lowers F; when it does not,
+  the step is too long for where the solve is (with the averaged TV prox, FISTA stalls at a
+  level set by its step, and float32 and float64 would otherwise part there: one sees a rise
+  where the other sees round-off).
 
 It stops after ``iters`` iterations, when the relative change ‖x⁺ − x‖/‖x⁺‖ falls below
 ``tol`` ("tolerance"), when the objective fell by less than ``plateau`` (relative) between two
@@ -159,7 +162,8 @@ class Fista:
     def _checkpoint(self, record: dict) -> dict:
         """Keep x if F(x) is the best so far; otherwise go back to the best (and back off if needed)."""
         value = self.objective(self.x)
-        if math.isfinite(value) and value <= self.best_objective + self.eps * abs(self.best_objective):
+        allowed = -self.eps if self.rolled_back else self.eps    # after a rollback F must fall beyond round-off
+        if math.isfinite(value) and value <= self.best_objective + allowed * abs(self.best_objective):
             self.best_objective, self.rolled_back = min(value, self.best_objective), False
             self.backend.copy(self.x, out=self.best)
             return {"objective": value}

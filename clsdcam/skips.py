@@ -69,5 +69,6 @@ def terms_line(off: list[str]) -> str | None:
 def subspace_line(rank: int, n_bands: int, start: int, captured: float, reason: str) -> str:
     if rank >= n_bands:
         return f"subspace: none ({reason})"
-    return (f"subspace: {rank} spectral basis vectors instead of {n_bands} bands from iteration {start} "
-            f"({100 * captured:.3f}% of the iterate's energy; {reason})")
+    vectors = "vector" if rank == 1 else "vectors"
+    return (f"subspace: {rank} spectral basis {vectors} instead of {n_bands} bands from iteration {start} "
+            f"({100 * captured:.1f}% of the iterate's energy; {reason})")

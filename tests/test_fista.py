@@ -100,6 +100,16 @@ def test_too_large_a_step_is_backed_off_and_the_run_converges(step_scale):
     np.testing.assert_allclose(result.x, problem.exact, rtol=1e-6, atol=1e-8)
 
 
+def test_a_checkpoint_after_a_rollback_must_lower_the_objective_or_the_step_is_halved():
+    """Rise → rollback; then a value equal to the best (no decrease beyond round-off) → back-off; then progress."""
+    problem = Quadratic(9)
+    values = iter([10.0, 9.0, 9.5, 9.0, 8.0, 7.0])   # x0, then one checkpoint per iteration
+    result = problem.run(iters=5, objective=lambda x: next(values), objective_every=1)
+    assert [(r["rollback"], r["backoff"]) for r in result.history] == [
+        (False, False), (True, False), (True, True), (False, False), (False, False)]
+    assert result.step == pytest.approx(0.5 / problem.lipschitz)
+
+
 def test_ctrl_c_returns_the_best_iterate():
     problem = Quadratic(6)
 

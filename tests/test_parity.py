@@ -6,6 +6,7 @@ Tolerances, relative to max|reference|: elementwise 1e-6, FFT-based 2e-6 + 5e-7Â
 reductions 1e-5.
 """
 import math
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -259,20 +260,30 @@ def test_convolution_with_unseen_bands_and_fused_step(engine):
     assert relative_error(be.to_host(step), ref.adjoint(r, np.empty_like(v), y, 0.4)) <= tolerance
 
 
-@pytest.mark.parametrize("host_subspace", [True, False])
-@pytest.mark.parametrize("weights", [(1.0, 1.0, 1.0), (0.0, 0.5, 2.0)])
-def test_subspace_tv_on_both_paths(host_subspace, weights):
-    """The subspace prox through the host code on mapped buffers (CPU devices' default) and through the
-    kernels (expand, haar_tv, project: other devices), whichever this device uses by default."""
-    be, ref = opencl("float32"), NumpyBackend("float32")
-    a = inputs("float32", seed=4)
-    default, be.host_subspace = be.host_subspace, host_subspace
+@contextmanager
+def path(be: OpenCLBackend, host: bool):
+    """``be`` with its subspace_tv, gram and bandmix on the host's code over mapped buffers (CPU devices'
+    default) or on the kernels (other devices'), whichever this device uses by default."""
+    default, be.host_kernels = be.host_kernels, host
     try:
-        got = be.to_host(be.subspace_tv(be.to_device(a["field"]), a["basis"], 0.05, weights))
+        yield be
     finally:
-        be.host_subspace = default
-    # float32 sums of r and K products in another order than BLAS: a few ulps of the largest term
-    assert relative_error(got, ref.subspace_tv(a["field"], a["basis"], 0.05, weights)) <= 10 * ELEMENTWISE
+        be.host_kernels = default
+
+
+# subspace_tv, gram and bandmix on both paths; float32 sums of r and K products in another order than BLAS's
+BAND_CASES = {"subspace_tv": 10 * ELEMENTWISE, "subspace_tv_weighted": 10 * ELEMENTWISE, "bandmix": 10 * ELEMENTWISE,
+              "bandmix_alias": 10 * ELEMENTWISE, "bandmix_expand": 10 * ELEMENTWISE,
+              "bandmix_project": 10 * ELEMENTWISE, "gram": REDUCTION}
+
+
+@pytest.mark.parametrize("host", [True, False])
+@pytest.mark.parametrize("case", BAND_CASES)
+def test_band_axis_primitives_on_both_paths(case, host):
+    a = inputs("float32", seed=4)
+    with path(opencl("float32"), host) as be:
+        got = run(be, case, a)
+    assert relative_error(got, run(NumpyBackend("float32"), case, a)) <= BAND_CASES[case]
 
 
 def test_host_buffers_are_released_only_at_a_sync_point_once_unused():
@@ -292,11 +303,11 @@ def test_host_buffers_are_released_only_at_a_sync_point_once_unused():
 def test_dropped_temporaries_do_not_corrupt_later_results():
     """A device input dropped right after its kernel is queued (its host memory is ours on CPU devices) keeps
     its memory until the queue drains: mixes of temporaries stay exact, call after call."""
-    be, ref = opencl("float32"), NumpyBackend("float32")
-    rng = np.random.default_rng(9)
-    for shape, rows in [((64, 300, 41), 6), ((64, 4, 4), 64)] * 3:
-        x, matrix = rng.standard_normal(shape).astype(np.float32), rng.standard_normal((rows, shape[0]))
-        assert relative_error(be.to_host(be.bandmix(be.to_device(x), matrix)), ref.bandmix(x, matrix)) <= 1e-5
+    ref, rng = NumpyBackend("float32"), np.random.default_rng(9)
+    with path(opencl("float32"), host=False) as be:                # the kernels: their inputs are dropped at once
+        for shape, rows in [((64, 300, 41), 6), ((64, 4, 4), 64)] * 3:
+            x, matrix = rng.standard_normal(shape).astype(np.float32), rng.standard_normal((rows, shape[0]))
+            assert relative_error(be.to_host(be.bandmix(be.to_device(x), matrix)), ref.bandmix(x, matrix)) <= 1e-5
 
 
 @pytest.mark.parametrize("engine", ENGINES)

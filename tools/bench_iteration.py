@@ -5,12 +5,13 @@
 
 Rows: the authors' published algorithm (tools/authors_baseline.py), clsdcam on NumPy and on OpenCL
 as the full solver (``--no-skip``: the paper's 2H × 2W field, every band), with the support-sized
-field in band space, and in spectral subspaces of forced ranks; and the FFT floor as the issue
-defines it, the 4·K real 2-D transforms an iteration needs (2 rfft2 + 2 irfft2 of K bands, pocketfft
-on all cores, the faster of one batched call and cache-sized chunks), at the paper's field and at
-the solver's own field. A clsdcam row is the time between two iterations of a solve, over 50
-steady-state iterations (so it includes its objective checks and, in a subspace, its basis checks
-every 25 iterations); set-up is not in it.
+field in band space, as the default runs (skips on, the rank its checks pick on the resolution
+target), and in spectral subspaces of forced ranks; and the FFT floor as the issue defines it, the
+4·K real 2-D transforms an iteration needs (2 rfft2 + 2 irfft2 of K bands, pocketfft on all cores,
+the faster of one batched call and cache-sized chunks, each the mean of 5 calls), at the paper's
+field and at the solver's own field. A clsdcam row is the time between two iterations of a solve,
+over 50 steady-state iterations (so it includes its objective checks and, in a subspace, its basis
+checks every 25 iterations); set-up is not in it.
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ from clsdcam.solver import Settings, Solver  # noqa: E402
 WINDOW = 50     # steady-state iterations timed per solve: 5 objective checks and, in a subspace, 2 basis checks
 AUTHORS = "authors (complex128, as published)"
 PAPER, OWN = "paper field", "solver's field"
+FLOOR_CALLS = 5  # FFT-floor calls averaged per strategy and round
 
 
 def configurations(bands: int, ranks, backends) -> dict:
@@ -42,6 +44,7 @@ def configurations(bands: int, ranks, backends) -> dict:
     configs = {}
     for backend in backends:
         configs[f"{backend} full solver (--no-skip)"] = (backend, {"skip": False}, 1)
+        configs[f"{backend} default (automatic rank)"] = (backend, {}, WARMUP + 1)
         configs[f"{backend} support field, {bands} bands"] = (backend, {"rank": bands}, 1)
         for rank in ranks:
             configs[f"{backend} subspace r = {rank}"] = (backend, {"rank": rank}, WARMUP + 1)
@@ -88,10 +91,12 @@ def floor_timer(bands: int, field):
     return lambda: 2 * min(_seconds(batched), _seconds(chunked))
 
 
-def _seconds(run) -> float:
+def _seconds(run, calls: int = FLOOR_CALLS) -> float:
+    """Mean seconds of ``calls`` runs (a clsdcam row is a mean too, so the ratio compares like with like)."""
     start = time.perf_counter()
-    run()
-    return time.perf_counter() - start
+    for _ in range(calls):
+        run()
+    return (time.perf_counter() - start) / calls
 
 
 def measure(args) -> dict:
@@ -156,7 +161,7 @@ def main(argv=None) -> int:
     parser.add_argument("--ranks", type=lambda t: [int(v) for v in t.split(",")], default=[3, 8])
     parser.add_argument("--backends", default="numpy,opencl")
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--no-authors", action="store_true", help="leave out the authors' algorithm (17 s/iteration)")
+    parser.add_argument("--no-authors", action="store_true", help="leave out the authors' algorithm (~10 s/iteration at full size)")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
     result = measure(args)

@@ -13,12 +13,12 @@ import numpy as np
 import scipy.fft
 
 from ..errors import InputError
+from . import host_linalg
 from .blocks import map_blocks, scratch_buffer
 from .host_convolution import HostConvolution
 from .host_tv import haar_block, haar_limits, halo, subspace_tv_blocks, tv_block_norm
 
 VDOT_ROW = 8192   # products per float32 partial sum in vdot
-GRAM_CHUNK = 8192  # pixels per partial Gram matrix
 COMPLEX_OF = {np.dtype(np.float32): np.dtype(np.complex64), np.dtype(np.float64): np.dtype(np.complex128)}
 
 
@@ -224,21 +224,12 @@ class NumpyBackend:
         return float(np.sum(np.abs(x), dtype=np.float64))
 
     def gram(self, x) -> np.ndarray:
-        """G = X Xᵀ (K×K, float64 on the host) of the bands×pixels unfolding X of x: products summed over
-        chunks of GRAM_CHUNK pixels in the array's dtype (BLAS), the chunks added in float64 (as the OpenCL
-        kernel), without a float64 copy of the cube."""
-        flat = x.reshape(x.shape[0], -1)
-        total = np.zeros((flat.shape[0], flat.shape[0]))
-        for start in range(0, flat.shape[1], GRAM_CHUNK):
-            chunk = flat[:, start:start + GRAM_CHUNK]
-            total += chunk @ chunk.T
-        return total
+        """G = X Xᵀ (K×K, float64) of the bands×pixels unfolding X of x (float64 sums of BLAS chunks)."""
+        return host_linalg.gram(x)
 
     def bandmix(self, x, matrix, out=None):
         """out_k = Σ_j M_kj x_j: a K×J matrix applied along the band axis of x (J bands)."""
-        flat = x.reshape(x.shape[0], -1)
-        mixed = np.dot(np.asarray(matrix, dtype=x.dtype), flat).reshape((np.shape(matrix)[0],) + x.shape[1:])
-        return _result(out, mixed)
+        return _result(out, host_linalg.bandmix(x, matrix))
 
     def subspace_tv(self, c, basis, tau, weights, out=None):
         """c⁺ = Bᵀ·max(0, haar_tv(B·c)): the TV prox and projection in band space for a cube in a spectral

@@ -25,6 +25,8 @@ try:
     from .cl_program import Kernels
     from .fft import HostFFT, make_fft, mapped
     from .host_convolution import HostConvolution
+    from .host_linalg import bandmix as host_bandmix
+    from .host_linalg import gram as host_gram
     from .host_tv import subspace_tv_blocks
     _IMPORT_ERROR = None
 except ImportError as _exc:  # no pyopencl: the constructor says how to install a driver
@@ -42,7 +44,7 @@ class OpenCLBackend:
     name = "opencl"
 
     def __init__(self, dtype="float32", device=None, fft: str | None = None, kahan: bool | None = None,
-                 host_subspace: bool | None = None):
+                 host_kernels: bool | None = None):
         self.dtype = real_dtype(dtype)
         self.cdtype = COMPLEX_OF[self.dtype]
         if _IMPORT_ERROR is not None:
@@ -57,7 +59,9 @@ class OpenCLBackend:
         self.fft = make_fft(self.queue, fft or "auto", self.dtype, self.kernels)
         self.fft_engine = self.fft.name
         self._band_cubes: dict = {}       # shape -> the band cubes of subspace_tv
-        self.host_subspace = isinstance(self.fft, HostFFT) if host_subspace is None else host_subspace
+        # CPU devices: subspace_tv, gram and bandmix run the host's code on mapped buffers (PoCL's kernels are
+        # 1.2-25× slower there); the kernels serve every other device (both paths parity-tested)
+        self.host_kernels = isinstance(self.fft, HostFFT) if host_kernels is None else host_kernels
 
     # ---- memory -------------------------------------------------------------------------
     def to_device(self, host, complex_: bool = False):
@@ -216,8 +220,11 @@ class OpenCLBackend:
     def gram(self, x) -> np.ndarray:
         """G = X Xᵀ (K×K, float64 on the host) of the bands×pixels unfolding X of x.
 
-        Work item (j, i, g) sums x_i·x_j over pixel chunk g (j ≥ i) in float64; the host adds the chunks.
+        Kernel: work item (j, i, g) sums x_i·x_j over pixel chunk g (j ≥ i) in float64; the host adds the chunks.
         """
+        if self.host_kernels:
+            with mapped(self.queue, x, READ) as host_x:
+                return host_gram(host_x)
         k, pixels = x.shape[0], x.size // x.shape[0]
         groups = max(1, min(-(-pixels // GRAM_CHUNK), 4 * self.device.max_compute_units))
         chunk = -(-pixels // groups)
@@ -230,20 +237,25 @@ class OpenCLBackend:
     def bandmix(self, x, matrix, out=None):
         """out_k = Σ_j M_kj x_j: a K×J matrix (from the host) applied along the band axis of x (J bands)."""
         rows, cols = np.shape(matrix)
-        pixels = x.size // x.shape[0]
-        m = cla.to_device(self.queue, np.ascontiguousarray(matrix, dtype=self.dtype))
         shape = (rows,) + x.shape[1:]
         target = self.empty(shape) if out is not None and _same_buffer(out, x) else self._out(out, shape, x.dtype)
-        self.kernels.grid2("bandmix", -(-pixels // BANDMIX_TILE), rows, target, x, m, np.int32(cols), np.int64(pixels))
+        if self.host_kernels:
+            with mapped(self.queue, x, READ) as host_x, mapped(self.queue, target, WRITE) as host_out:
+                host_bandmix(host_x, matrix, out=host_out)
+        else:
+            pixels = x.size // x.shape[0]
+            m = cla.to_device(self.queue, np.ascontiguousarray(matrix, dtype=self.dtype))
+            self.kernels.grid2("bandmix", -(-pixels // BANDMIX_TILE), rows, target, x, m, np.int32(cols),
+                               np.int64(pixels))
         return self.copy(target, out) if target is not out and out is not None else target
 
     def subspace_tv(self, c, basis, tau, weights, out=None):
         """c⁺ = Bᵀ·max(0, haar_tv(B·c)) (see NumpyBackend.subspace_tv). On CPU devices, the host's cache-blocked
         code on the mapped buffers (at 64×576×800, r = 3: ~90 ms against ~145 ms for the kernels, which
-        must write and read two band cubes); elsewhere, or with ``host_subspace=False``, the kernels:
+        must write and read two band cubes); elsewhere, or with ``host_kernels=False``, the kernels:
         expand, the fused haar_tv, project."""
         target = self.empty(c.shape) if out is not None and _same_buffer(out, c) else self._out(out, c.shape, c.dtype)
-        if self.host_subspace:
+        if self.host_kernels:
             with mapped(self.queue, c, READ) as host_c, mapped(self.queue, target, WRITE) as host_out:
                 subspace_tv_blocks(host_c, basis, tau, weights, host_out, self.fft.workers)
         else:
