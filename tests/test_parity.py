@@ -262,8 +262,8 @@ def test_convolution_with_unseen_bands_and_fused_step(engine):
 
 @contextmanager
 def path(be: OpenCLBackend, host: bool):
-    """``be`` with its subspace_tv, gram and bandmix on the host's code over mapped buffers (CPU devices'
-    default) or on the kernels (other devices'), whichever this device uses by default."""
+    """``be`` with its subspace_tv, gram, bandmix and tv_norm on the host's code over mapped buffers
+    (CPU devices' default) or on the kernels (other devices'), whichever this device uses by default."""
     default, be.host_kernels = be.host_kernels, host
     try:
         yield be
@@ -271,19 +271,21 @@ def path(be: OpenCLBackend, host: bool):
         be.host_kernels = default
 
 
-# subspace_tv, gram and bandmix on both paths; float32 sums of r and K products in another order than BLAS's
-BAND_CASES = {"subspace_tv": 10 * ELEMENTWISE, "subspace_tv_weighted": 10 * ELEMENTWISE, "bandmix": 10 * ELEMENTWISE,
-              "bandmix_alias": 10 * ELEMENTWISE, "bandmix_expand": 10 * ELEMENTWISE,
-              "bandmix_project": 10 * ELEMENTWISE, "gram": REDUCTION}
+# the primitives with a host path on CPU devices, on both paths; float32 sums of r and K products in another
+# order than BLAS's
+HOST_PATH_CASES = {"subspace_tv": 10 * ELEMENTWISE, "subspace_tv_weighted": 10 * ELEMENTWISE,
+                   "bandmix": 10 * ELEMENTWISE, "bandmix_alias": 10 * ELEMENTWISE, "bandmix_expand": 10 * ELEMENTWISE,
+                   "bandmix_project": 10 * ELEMENTWISE, "gram": REDUCTION, "tv_norm": REDUCTION,
+                   "tv_norm_xy": REDUCTION}
 
 
 @pytest.mark.parametrize("host", [True, False])
-@pytest.mark.parametrize("case", BAND_CASES)
-def test_band_axis_primitives_on_both_paths(case, host):
+@pytest.mark.parametrize("case", HOST_PATH_CASES)
+def test_host_path_primitives_on_both_paths(case, host):
     a = inputs("float32", seed=4)
     with path(opencl("float32"), host) as be:
         got = run(be, case, a)
-    assert relative_error(got, run(NumpyBackend("float32"), case, a)) <= BAND_CASES[case]
+    assert relative_error(got, run(NumpyBackend("float32"), case, a)) <= HOST_PATH_CASES[case]
 
 
 def test_host_buffers_are_released_only_at_a_sync_point_once_unused():

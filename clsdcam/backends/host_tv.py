@@ -95,6 +95,17 @@ def tv_block_norm(xh: np.ndarray, top: int, n: int, weights) -> float:
     return float(sum(wd * np.abs(diff).sum(dtype=np.float64) for wd, diff in parts if wd > 0))
 
 
+def tv_norm_blocks(x: np.ndarray, weights, workers: int) -> float:
+    """Σ_d w_d Σ_i |x_{i+e_d} − x_i| of a (K, H, W) cube in float64, by row blocks over ``workers`` threads."""
+    k, h, w = x.shape
+
+    def block(y0, y1, _scratch):
+        top, bottom = halo(h, y0, y1)
+        return tv_block_norm(x[:, y0 - top:y1 + bottom], top, y1 - y0, weights)
+
+    return float(sum(map_blocks(block, h, k * w * x.itemsize, workers)))
+
+
 def subspace_tv_blocks(c: np.ndarray, basis: np.ndarray, tau: float, weights, out: np.ndarray, workers: int):
     """out = Bᵀ·max(0, haar_tv(B·c)) block by block: a block's coefficients (with halo rows) are expanded
     to its K bands, stepped, clipped at 0 and projected, all in cache. ``out`` must not alias ``c``."""

@@ -16,7 +16,7 @@ from ..errors import InputError
 from . import host_linalg
 from .blocks import map_blocks, scratch_buffer
 from .host_convolution import HostConvolution
-from .host_tv import haar_block, haar_limits, halo, subspace_tv_blocks, tv_block_norm
+from .host_tv import haar_block, haar_limits, halo, subspace_tv_blocks, tv_norm_blocks
 
 VDOT_ROW = 8192   # products per float32 partial sum in vdot
 COMPLEX_OF = {np.dtype(np.float32): np.dtype(np.complex64), np.dtype(np.float64): np.dtype(np.complex128)}
@@ -199,13 +199,7 @@ class NumpyBackend:
 
     def tv_norm(self, x, weights) -> float:
         """Σ_d w_d Σ_i |x_{i+1} − x_i| along axis d (cube order λ, y, x), in float64, by row blocks."""
-        k, h, w = x.shape
-
-        def block(y0, y1, _scratch):
-            top, bottom = halo(h, y0, y1)
-            return tv_block_norm(x[:, y0 - top:y1 + bottom], top, y1 - y0, weights)
-
-        return float(sum(map_blocks(block, h, k * w * x.itemsize, self.workers)))
+        return tv_norm_blocks(x, weights, self.workers)
 
     def fista_stats(self, x_new, x_old, y) -> tuple[float, float, float]:
         """(‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩) in one pass over row blocks: FISTA's change and restart test."""

@@ -1,6 +1,5 @@
 """Killing a writer (SIGKILL, no chance to clean up) leaves the output path with nothing, the old
 file, or a complete new file — never a partial one."""
-import os
 import signal
 import subprocess
 import sys
