@@ -205,7 +205,7 @@ class OpenCLBackend:
 
     def tv_norm(self, x, weights) -> float:
         """Σ_d w_d Σ_i |x_{i+1} − x_i| along axis d (cube order λ, y, x), partial sums in float64 (on CPU
-        devices the host's row blocks over the mapped cube, ~25% faster than the kernel on PoCL)."""
+        devices the host's row blocks over the mapped cube)."""
         if self.host_kernels:
             with mapped(self.queue, x, READ) as host_x:
                 return self._drained(tv_norm_blocks(host_x, weights, self.fft.workers))
