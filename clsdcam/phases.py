@@ -29,6 +29,7 @@ from typing import Callable
 import numpy as np
 
 from .geometry import centred_geometry
+from .interrupts import held_interrupt
 from .problem import Problem
 from .skips import SkipReport, subspace_line
 from .subspace import Spectra, SpectralSubspace
@@ -87,6 +88,7 @@ class Phases:
         self.tracker = tracker
         self.regularizer = regularizer
         self.n_bands = solver.model.n_bands
+        self.problem: Problem | None = None         # the space FISTA's iterates are in
         self._full: Problem | None = None
         self._buffers: dict = {}
         self._lipschitz = solver.lipschitz          # of the space the loop is in
@@ -94,22 +96,31 @@ class Phases:
 
     def run(self, problem: Problem, warm_started: bool) -> tuple[str, Problem]:
         """(stop reason, the problem the final iterate lives in)."""
+        self.problem = problem
+        try:
+            return self._run_phases(warm_started), self.problem
+        except KeyboardInterrupt:     # between FISTA runs; moves between spaces finish first (held_interrupt)
+            return "interrupted", self.problem
+
+    def _run_phases(self, warm_started: bool) -> str:
         iters, loop = self.settings.iters, self.loop
         if self._subspace_allowed():
-            reason = self._run(problem, 0 if warm_started else min(WARMUP, iters))
+            reason = self._run(self.problem, 0 if warm_started else min(WARMUP, iters))
             if reason:
-                return reason, problem
+                return reason
             if loop.iterations < iters:
-                problem = self._enter_subspace(problem)
+                with held_interrupt():
+                    self.problem = self._enter_subspace(self.problem)
         while loop.iterations < iters:
             left = iters - loop.iterations
-            checking = problem.subspace is not None
-            reason = self._run(problem, min(CHECK_EVERY, left) if checking else left)
+            checking = self.problem.subspace is not None
+            reason = self._run(self.problem, min(CHECK_EVERY, left) if checking else left)
             if reason:
-                return reason, problem
+                return reason
             if checking and loop.iterations < iters:
-                problem = self._check_width(problem)
-        return "iterations", problem
+                with held_interrupt():
+                    self.problem = self._check_width(self.problem)
+        return "iterations"
 
     def refreshes_line(self) -> str | None:
         """How often the basis was re-estimated at the same rank (for the skip report)."""

@@ -1,10 +1,12 @@
 """What the solver skips, that it says so, and that skipping costs no accuracy on simulated scenes."""
+import signal
+
 import numpy as np
 import pytest
 
 from clsdcam import Settings, Solver
 from clsdcam.metrics import psnr
-from clsdcam.phases import WARMUP
+from clsdcam.phases import CHECK_EVERY, WARMUP, Phases
 from clsdcam.sim import simulate
 
 
@@ -81,3 +83,20 @@ def test_widening_follows_the_data_and_band_space_is_the_last_resort():
 def test_few_bands_stay_in_band_space():
     sim = simulate(scene="leds", shape=(32, 48), n_bands=3, seed=0)
     assert {r["rank"] for r in solve(sim, iters=20).history} == {3}
+
+
+@pytest.mark.parametrize("move, after", [("_enter_subspace", WARMUP), ("_check_width", WARMUP + CHECK_EVERY)])
+def test_ctrl_c_while_the_iterates_change_space_stops_with_a_whole_cube(leds, monkeypatch, move, after):
+    """A SIGINT during a move between spaces lets the move finish, then stops as "interrupted" with the cube of
+    the space the iterates are in (it used to escape the solve as a KeyboardInterrupt, losing the cube)."""
+    original = getattr(Phases, move)
+
+    def interrupted_move(self, problem):
+        signal.raise_signal(signal.SIGINT)
+        return original(self, problem)
+
+    monkeypatch.setattr(Phases, move, interrupted_move)
+    result = solve(leds, iters=200)
+    assert result.stop_reason == "interrupted" and result.iterations == after
+    assert "subspace:" in result.attrs["skips"]
+    assert np.isfinite(result.cube).all() and result.cube.min() >= 0 and result.cube.max() > 0
