@@ -133,6 +133,28 @@ def _paper_layout(path, contents: dict):
 
 # ---- preprocessing ----------------------------------------------------------------------------
 @dataclass(frozen=True)
+class PixelMask:
+    """A set of pixels of an (H, W) frame, as sorted (y, x) pairs: hashable, comparable and picklable, so the
+    :class:`Preprocessing` holding it is too (an ndarray field would make ``==`` and ``hash`` raise)."""
+
+    shape: tuple[int, int]
+    pixels: tuple[tuple[int, int], ...]
+
+    @classmethod
+    def of(cls, mask) -> "PixelMask":
+        """The non-zero pixels of a 2-D array."""
+        mask = np.asarray(mask) != 0
+        return cls(tuple(int(n) for n in mask.shape), tuple((int(y), int(x)) for y, x in np.argwhere(mask)))
+
+    def array(self) -> np.ndarray:
+        """(H, W) bool, True at the pixels."""
+        mask = np.zeros(self.shape, bool)
+        if self.pixels:
+            mask[tuple(np.array(self.pixels).T)] = True
+        return mask
+
+
+@dataclass(frozen=True)
 class Preprocessing:
     """Which preprocessing steps to apply; the defaults suit an already-cropped calibration."""
 
@@ -142,7 +164,7 @@ class Preprocessing:
     zero_defect: bool = False
     drop_last_band: bool = False
     saturation: float | None = None          # exclude pixels with b ≥ saturation from the data term
-    dead_pixels: np.ndarray | None = None    # (H, W) bool, after cropping: pixels to exclude
+    dead_pixels: PixelMask | None = None     # pixels to exclude, on the frame after cropping
 
     @classmethod
     def reference(cls) -> "Preprocessing":
@@ -222,7 +244,7 @@ def excluded_pixels(b: np.ndarray, options: Preprocessing) -> np.ndarray:
         if options.dead_pixels.shape != b.shape:
             raise InputError(f"dead-pixel mask {shape_text(options.dead_pixels.shape)} does not match the "
                              f"measurement {shape_text(b.shape)} (after cropping)")
-        excluded |= options.dead_pixels
+        excluded |= options.dead_pixels.array()
     return excluded
 
 

@@ -241,13 +241,14 @@ def preprocessing(args):
 
 
 def _dead_pixels(path, crop):
-    """The --dead-pixels mask as (H, W) bool, cropped like the measurement."""
+    """The --dead-pixels mask, cropped like the measurement."""
     if path is None:
         return None
+    from .calibration import PixelMask
     from .io import load_measurement
 
-    mask = load_measurement(path) != 0
-    return mask if crop is None else mask[crop[0]:crop[1], crop[2]:crop[3]]
+    mask = load_measurement(path)
+    return PixelMask.of(mask if crop is None else mask[crop[0]:crop[1], crop[2]:crop[3]])
 
 
 def settings(args):

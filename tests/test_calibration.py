@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from clsdcam.calibration import Calibration, Preprocessing, parse_crop, preprocess, zero_defect_block
+from clsdcam.calibration import Calibration, PixelMask, Preprocessing, parse_crop, preprocess, zero_defect_block
 from clsdcam.errors import InputError
 from clsdcam.io import load_measurement
 
@@ -107,6 +107,21 @@ def test_crop_applies_to_both_and_checks_bounds():
         preprocess(cal, np.zeros((H, W)), Preprocessing(crop=(0, H + 1, 0, 3)))
     with pytest.raises(InputError, match="give --crop"):
         preprocess(cal, np.zeros((H + 2, W)), Preprocessing())
+
+
+def test_dead_pixels_are_excluded_and_preprocessing_is_hashable():
+    cal = Calibration(PSF, np.moveaxis(MASK, -1, 0), WAVS)
+    mask = np.zeros((H, W))
+    mask[2, 3] = mask[7, 1] = 1
+    dead = PixelMask.of(mask)
+    assert dead.pixels == ((2, 3), (7, 1)) and np.array_equal(dead.array(), mask != 0)
+    options = Preprocessing(dead_pixels=dead)
+    assert options == Preprocessing(dead_pixels=PixelMask.of(mask)) and hash(options) == hash(Preprocessing(dead_pixels=dead))
+    out, b = preprocess(cal, np.ones((H, W)), options)
+    assert b[2, 3] == 0 and b[7, 1] == 0 and b.sum() == H * W - 2
+    assert not out.filters[:, 2, 3].any() and out.filters[:, 2, 4].all()
+    with pytest.raises(InputError, match="dead-pixel mask"):
+        preprocess(cal, np.ones((H, W)), Preprocessing(dead_pixels=PixelMask.of(np.ones((H, W + 1)))))
 
 
 def test_parse_crop():
