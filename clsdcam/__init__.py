@@ -13,7 +13,7 @@ _LAZY = {
     "Preprocessing": "clsdcam.calibration",
     "reconstruct": "clsdcam.solver",
     "Solver": "clsdcam.solver",
-    "Settings": "clsdcam.solver",
+    "Settings": "clsdcam.settings",
     "Result": "clsdcam.solver",
     "InputError": "clsdcam.errors",
 }

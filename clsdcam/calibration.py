@@ -4,7 +4,7 @@ Layouts read:
 - the paper's ``calibration.mat``: ``psf`` (H,W), ``mask`` (H,W,K), ``wavs`` (1,K) or (K,1),
   in MATLAB v5 (scipy.io) or v7.3 (HDF5; MATLAB stores arrays transposed, undone here);
 - our HDF5: ``psf`` (H,W), ``filters`` (K,H,W), ``wavelengths`` (K,).
-Inside, filters are (K,H,W) (see DESIGN.md); the file's (H,W,K) is converted at load time.
+Inside, filters are (K,H,W) (docs/conventions.md); the file's (H,W,K) is converted at load time.
 
 Preprocessing (each step an option, the reference set in :meth:`Preprocessing.reference`):
 crop a window of calibration and measurement, drop the last band, zero the 4×4 defective

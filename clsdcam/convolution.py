@@ -1,4 +1,4 @@
-"""The filtered convolution at the heart of A, written once over the backend primitives.
+"""The filtered convolution at the heart of A, built in the model layer from the backend's primitives.
 
 With Ĥ the transfer function with the sensor window at the FFT origin
 (:func:`clsdcam.geometry.transfer_function`), F_k the filters and (H, W) the sensor:
@@ -7,22 +7,69 @@ With Ĥ the transfer function with the sensor window at the FFT origin
     adjoint:   (Aᵀr)_k = irfft2(conj(Ĥ) · rfft2(pad₀(F_k ⊙ r)))
     gradient step (fused):  z = y − s·Aᵀr
 
-Every convolution object has the same three methods and ``with_filters`` (the same geometry
-and transfer with other filters: the spectral subspace's G = BᵀF). Backends pick the fastest
-they have through ``backend.convolution(...)``: :class:`PrimitiveConvolution` here (whole
-cubes, primitive by primitive: OpenCL on GPUs), or the host's band-chunked, pruned pocketfft
-pipeline (:mod:`clsdcam.backends.host_convolution`: NumPy, and OpenCL on CPU devices).
+Two implementations of one operator, chosen by the backend's path (``backends/base.py``):
+
+* host path: :class:`HostPathConvolution`, the band-chunked, pruned pocketfft pipeline
+  (``backends/host_convolution.py``) on the backend's host views (NumPy arrays as they are, an
+  OpenCL CPU device's buffers mapped);
+* device path: :class:`PrimitiveConvolution`, whole cubes primitive by primitive
+  (fft2 → cmul → ifft2 → mask_sum, and back), every step a kernel.
+
+Both have ``forward``, ``adjoint``, ``with_filters`` (the same geometry and transfer with other filters:
+the spectral subspace's G = BᵀF) and ``transforms``.
 """
 from __future__ import annotations
 
-import numpy as np
+from contextlib import ExitStack
+
+from .backends.host_convolution import HostConvolution
 
 ORIGIN = (0, 0)
 
 
-def seen_bands(filters: np.ndarray) -> np.ndarray:
-    """(K,) bool: bands whose filter is non-zero somewhere (the others add nothing to b and get no gradient)."""
-    return np.any(np.asarray(filters) != 0, axis=tuple(range(1, np.ndim(filters))))
+def filtered_convolution(backend, transfer, filters, field_shape, skip_unseen: bool = True):
+    """The convolution of ``backend``'s path (``skip_unseen``: no FFTs for bands no filter sees, host path)."""
+    if backend.path == "host":
+        return HostPathConvolution(backend, HostConvolution(transfer, filters, field_shape, backend.dtype,
+                                                            backend.workers, skip_unseen))
+    return PrimitiveConvolution(backend, transfer, filters, field_shape)
+
+
+class HostPathConvolution:
+    """:class:`~clsdcam.backends.host_convolution.HostConvolution` on one backend's host views."""
+
+    def __init__(self, backend, host: HostConvolution):
+        self.backend = backend
+        self.host = host
+        self.n_bands = host.n_bands
+
+    def forward(self, v, out):
+        """b = Σ_k F_k ⊙ [irfft2(Ĥ · rfft2(v_k))]_{0:H, 0:W}."""
+        view = self.backend.host_view
+        with view(v, "r") as host_v, view(out, "w") as host_out:
+            self.host.forward(host_v, host_out)
+        return out
+
+    def adjoint(self, r, out, y=None, step: float = 1.0):
+        """out = Aᵀr, or the gradient step out = y − step·Aᵀr when y is given (out may be y itself)."""
+        view = self.backend.host_view
+        with ExitStack() as stack:
+            host_r = stack.enter_context(view(r, "r"))
+            if y is None:
+                self.host.adjoint(host_r, stack.enter_context(view(out, "w")))
+            elif out is y:
+                host_y = stack.enter_context(view(y, "rw"))
+                self.host.adjoint(host_r, host_y, host_y, step)
+            else:
+                host_y = stack.enter_context(view(y, "r"))
+                self.host.adjoint(host_r, stack.enter_context(view(out, "w")), host_y, step)
+        return out
+
+    def with_filters(self, filters) -> "HostPathConvolution":
+        return HostPathConvolution(self.backend, self.host.with_filters(filters))
+
+    def transforms(self) -> int:
+        return self.host.transforms()
 
 
 class PrimitiveConvolution:
@@ -31,9 +78,7 @@ class PrimitiveConvolution:
     def __init__(self, backend, transfer, filters, field_shape, transfer_on_device=None):
         be = self.backend = backend
         self.field_shape = tuple(field_shape)
-        self.sensor_shape = tuple(filters.shape[-2:])
         self.n_bands = filters.shape[0]
-        self.seen = seen_bands(filters)
         self._transfer_host = transfer
         self.transfer = transfer_on_device if transfer_on_device is not None else be.to_device(transfer, complex_=True)
         self.filters = be.to_device(filters)

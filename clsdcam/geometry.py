@@ -1,6 +1,6 @@
 """Where the scene field, the sensor window and the PSF sit relative to each other.
 
-Conventions (DESIGN.md): the PSF's origin is its centre pixel c = (H//2, W//2); the scene
+Conventions (docs/conventions.md): the PSF's origin is its centre pixel c = (H//2, W//2); the scene
 field (Hp, Wp) holds the sensor window (H, W) at ``offset`` = (oy, ox); the cube written to
 files is that window. With h_c(s) = psf[c + s] for offsets s in the PSF's support
 [s_lo, s_hi] (per axis),

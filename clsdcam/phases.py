@@ -41,6 +41,11 @@ WIDEN_GAIN = 1e-2
 MAX_RANK_FRACTION = 0.5
 
 
+def in_data_units(record: dict, scale: float) -> dict:
+    """A copy of a FISTA record (solver units, b / max|b|) with the data term and objective in data units (×s²)."""
+    return {**record, "data": record["data"] * scale ** 2, "objective": record["objective"] * scale ** 2}
+
+
 class Tracker:
     """Per-iteration bookkeeping: data units, rank and FFTs of each iteration, snapshots, progress, FFT work."""
 
@@ -56,10 +61,9 @@ class Tracker:
         self.full_transforms = 4 * model.n_bands        # the full solver's gradient step
 
     def on(self, problem: Problem):
-        """FISTA's on_iteration callback for iterations in ``problem``'s space."""
+        """FISTA's on_iteration callback for iterations in ``problem``'s space: adds the rank and transforms to
+        the record (its numbers stay in solver units: FISTA's rules compare them); progress gets data units."""
         def on_iteration(record: dict, x):
-            for key in ("data", "objective"):
-                record[key] *= self.scale ** 2
             evaluated = math.isfinite(record["objective"])
             transforms = problem.transforms() * (3 if evaluated else 2) // 2     # + a forward for F(x)
             record["rank"] = problem.rank
@@ -68,7 +72,7 @@ class Tracker:
             if record["iteration"] in self.snapshots:
                 self.kept[record["iteration"]] = (self.model.window(problem.solution(x)) * self.scale).astype(np.float32)
             if self.progress is not None:
-                self.progress(record)
+                self.progress(in_data_units(record, self.scale))
         return on_iteration
 
     def count(self, transforms: int, full_transforms: int = 0):
@@ -80,13 +84,13 @@ class Tracker:
 class Phases:
     """Runs one solve's FISTA loop through its spaces (see the module docstring)."""
 
-    def __init__(self, solver, loop, tracker: Tracker, regularizer):
+    def __init__(self, solver, loop, tracker: Tracker, priors: list):
         self.solver = solver
         self.settings = solver.settings
         self.backend = solver.backend
         self.loop = loop
         self.tracker = tracker
-        self.regularizer = regularizer
+        self.priors = priors
         self.n_bands = solver.model.n_bands
         self.problem: Problem | None = None         # the space FISTA's iterates are in
         self._full: Problem | None = None
@@ -163,7 +167,7 @@ class Phases:
         return int(np.searchsorted(held, 1.0 - START_TAIL) + 1)
 
     def _subspace_problem(self, basis: np.ndarray, start=None) -> Problem:
-        sub = SpectralSubspace(self.solver.model, basis, self.regularizer, self.solver.calibration.filters, start)
+        sub = SpectralSubspace(self.solver.model, basis, self.priors, self.solver.calibration.filters, start)
         return Problem(sub.model, self.solver.b, sub.prox, sub.penalty, sub.rank, subspace=sub)
 
     def _step(self, lipschitz: float) -> float:
@@ -221,7 +225,7 @@ class Phases:
 
     def _full_problem(self) -> Problem:
         if self._full is None:
-            self._full = self.solver.band_problem(self.regularizer)
+            self._full = self.solver.band_problem(self.priors)
         return self._full
 
     def _cube(self, name: str):

@@ -1,62 +1,145 @@
-"""Priors and their proximal operators, written once over the backend primitives.
+"""Priors: each term of the regulariser is an object with its prox and its value; one table lists them.
 
-The regulariser is g(v) = τ₁·TV_w(v) + τ₂·‖V‖_* + τ₃·‖v‖₁ + ι_{v≥0}(v), where
-TV_w(v) = Σ_d w_d ‖∇_d v‖₁ is the weighted anisotropic 3-D TV (axes λ, y, x) and V the
-pixels×bands unfolding. FISTA needs prox_{g/L}. As in the paper's solver, the proxes of
-the active terms are averaged (the proximal average, which is exact for one term); unlike
-the paper, non-negativity is then imposed by projection so the cube is never negative:
+The regulariser is g(v) = Σ_i τ_i·φ_i(v) + ι_{v≥0}(v). FISTA needs prox_{s·g}; as in the paper's solver,
+the proxes of the active terms are averaged (the proximal average, as SCICO's ``ProxAvg``; exact for one
+term), and non-negativity is then imposed by projection, so the cube is never negative:
 
-    prox(z) = max(0, mean_i prox_{τ_i φ_i / L}(z))
+    prox(z) = max(0, mean_i prox_{s·τ_i φ_i}(z))          (no active term: max(z, 0))
 
-with no active term, prox(z) = max(z, 0). Weights here are absolute (the solver scales the
-user's relative weights by the data, see ``clsdcam.solver``).
+Weights. A user's weight is relative; each prior says what 1.0 means (its ``reference``, computed by
+the solver for the measurement divided by max|b|): ``atb_max`` = ‖Aᵀb‖_∞ (the weight above which an L1
+prior would zero the cube: TV, L1), ``atb_sigma1`` = σ₁(Aᵀb) (the largest singular value of the
+pixels×bands unfolding of Aᵀb: nuclear norm), ``lipschitz`` = L = λmax(AᵀA) (quadratic priors: the data
+term's stiffest curvature). So scaling a measurement by s scales the cube by s, and the same weights
+suit any PSF or filter normalisation.
+
+Adding a prior: one class (``prox``, ``value``, ``reference``; the math in its docstring) and one row
+of :data:`PRIORS` (the ``Settings`` field and the ``--flag`` are generated from the row), and one test.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import Callable, ClassVar
 
 import numpy as np
 
 
-@dataclass(frozen=True)
-class Regularizer:
-    """Absolute weights of each term; a zero weight removes the term (it costs nothing)."""
+class Prior:
+    """One term τ·φ(v) with absolute weight τ > 0, on one backend."""
 
-    tv: float = 0.0
-    tv_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)  # (x, y, λ), as on the command line
-    lowrank: float = 0.0
-    l1: float = 0.0
+    name: ClassVar[str]
+    reference: ClassVar[str]        # what a relative weight of 1 means (see the module docstring)
+    # subspace_prox(c, basis, step, out): out = Bᵀ·max(0, prox(B·c)) for coefficients c of basis B, fused;
+    # None when the prior has none (the subspace then expands, applies prox_nonneg and projects)
+    subspace_prox: ClassVar[Callable | None] = None
+
+    def __init__(self, backend, weight: float, settings):
+        self.backend = backend
+        self.weight = float(weight)
 
     @property
-    def axis_weights(self) -> tuple[float, float, float]:
-        """TV weights in cube axis order (λ, y, x)."""
-        wx, wy, wl = self.tv_weights
-        return (wl, wy, wx)
+    def active(self) -> bool:
+        """Whether the term does anything (a zero weight removes it: it costs nothing)."""
+        return self.weight > 0
 
-    def active_terms(self) -> list[str]:
-        terms = []
-        if self.tv > 0 and any(w > 0 for w in self.tv_weights):
-            terms.append("tv")
-        if self.lowrank > 0:
-            terms.append("lowrank")
-        if self.l1 > 0:
-            terms.append("l1")
-        return terms
+    def prox(self, z, step: float, out):
+        """out = prox_{step·τ·φ}(z) = argmin_x ½‖x − z‖² + step·τ·φ(x)."""
+        raise NotImplementedError
 
-    def inactive_terms(self) -> list[str]:
-        """Terms with zero weight: never evaluated."""
-        return [term for term in ("tv", "lowrank", "l1") if term not in self.active_terms()]
+    def value(self, x) -> float:
+        """τ·φ(x)."""
+        raise NotImplementedError
 
-    def value(self, backend, v) -> float:
-        """g(v) without the indicator (v is assumed non-negative)."""
-        total = 0.0
-        if "tv" in self.active_terms():
-            total += self.tv * backend.tv_norm(v, self.axis_weights)
-        if self.lowrank > 0:
-            total += self.lowrank * float(np.sum(singular_values(backend, v)))
-        if self.l1 > 0:
-            total += self.l1 * backend.l1_norm(v)
-        return total
+    def prox_nonneg(self, z, step: float, out):
+        """out = max(0, prox_{step·τ·φ}(z)) (fused where the backend can)."""
+        return self.backend.nonneg(self.prox(z, step, out), out=out)
+
+
+class TotalVariation(Prior):
+    """φ(v) = TV_w(v) = Σ_d w_d ‖∇_d v‖₁, the weighted anisotropic 3-D TV (axes λ, y, x; ``tv_weights`` are
+    given as x, y, λ). Its prox is one parallel-proximal Haar step (Kamilov 2016, ``Backend.haar_tv``)."""
+
+    name = "tv"
+    reference = "atb_max"
+
+    def __init__(self, backend, weight: float, settings):
+        super().__init__(backend, weight, settings)
+        wx, wy, wl = settings.tv_weights
+        self.axis_weights = (wl, wy, wx)
+
+    @property
+    def active(self) -> bool:
+        return self.weight > 0 and any(w > 0 for w in self.axis_weights)
+
+    def prox(self, z, step: float, out):
+        return self.backend.haar_tv(z, step * self.weight, self.axis_weights, out=out)
+
+    def prox_nonneg(self, z, step: float, out):
+        return self.backend.haar_tv(z, step * self.weight, self.axis_weights, out=out, nonneg=True)
+
+    def value(self, x) -> float:
+        return self.weight * self.backend.tv_norm(x, self.axis_weights)
+
+    def subspace_prox(self, c, basis, step: float, out):
+        return self.backend.subspace_tv(c, basis, step * self.weight, self.axis_weights, out=out)
+
+
+class LowRank(Prior):
+    """φ(v) = ‖V‖_*, the nuclear norm of the pixels×bands unfolding V; its prox is singular-value
+    thresholding through the K×K Gram matrix (:func:`lowrank_matrix`)."""
+
+    name = "lowrank"
+    reference = "atb_sigma1"
+
+    def prox(self, z, step: float, out):
+        return prox_lowrank(self.backend, z, step * self.weight, out=out)
+
+    def value(self, x) -> float:
+        return self.weight * float(np.sum(singular_values(self.backend, x)))
+
+
+class Sparsity(Prior):
+    """φ(v) = ‖v‖₁; its prox is soft thresholding."""
+
+    name = "l1"
+    reference = "atb_max"
+
+    def prox(self, z, step: float, out):
+        return self.backend.soft(z, step * self.weight, out=out)
+
+    def value(self, x) -> float:
+        return self.weight * self.backend.l1_norm(x)
+
+
+class SpectralSmoothness(Prior):
+    """φ(v) = ½ Σ_pixels ‖D v_p‖², D the second differences along λ ((Dv)_k = v_{k−1} − 2v_k + v_{k+1},
+    per band index): smooth spectra, as the Spectral DiffuserScope's solver assumes. Quadratic, so its
+    prox is linear and the same for every pixel: prox_{s·τφ}(z) = (I + sτ·DᵀD)⁻¹ z along the band axis,
+    one ``bandmix`` with a K×K matrix; its value ½ Σ_p v_pᵀ DᵀD v_p = ½ tr(DᵀD·G), G the Gram matrix."""
+
+    name = "spectral"
+    reference = "lipschitz"
+
+    def prox(self, z, step: float, out):
+        return self.backend.bandmix(z, _smoothing_matrix(z.shape[0], step * self.weight), out=out)
+
+    def value(self, x) -> float:
+        return 0.5 * self.weight * float(np.sum(second_difference_gram(x.shape[0]) * self.backend.gram(x)))
+
+
+def second_difference_gram(n_bands: int) -> np.ndarray:
+    """DᵀD for the (K−2)×K second-difference matrix D (zero for K < 3)."""
+    d = np.zeros((max(n_bands - 2, 0), n_bands))
+    for k in range(n_bands - 2):
+        d[k, k:k + 3] = (1.0, -2.0, 1.0)
+    return d.T @ d
+
+
+@lru_cache(maxsize=8)
+def _smoothing_matrix(n_bands: int, strength: float) -> np.ndarray:
+    """(I + strength·DᵀD)⁻¹ (the steps in use recur: cached)."""
+    return np.linalg.inv(np.eye(n_bands) + strength * second_difference_gram(n_bands))
 
 
 def singular_values(backend, v) -> np.ndarray:
@@ -81,31 +164,76 @@ def prox_lowrank(backend, z, threshold, out=None):
     return backend.bandmix(z, lowrank_matrix(backend.gram(z), threshold), out=out)
 
 
-class Prox:
-    """prox_{g/L} for one regulariser, with its scratch buffers allocated once."""
+# ---- the table -----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PriorRow:
+    """One prior as users meet it: the ``Settings`` field and ``--flag`` ``name``, default and help."""
 
-    def __init__(self, backend, regularizer: Regularizer, shape):
+    prior: type[Prior]
+    default: float
+    help: str
+
+    @property
+    def name(self) -> str:
+        return self.prior.name
+
+    @property
+    def flag(self) -> str:
+        return "--" + self.name.replace("_", "-")
+
+
+PRIORS: tuple[PriorRow, ...] = (
+    PriorRow(TotalVariation, 1e-3, "3-D total variation weight, relative to ‖Aᵀb‖∞ (axes weighted by --tv-weights)"),
+    PriorRow(LowRank, 0.0, "nuclear-norm (low-rank) weight, relative to σ₁(Aᵀb) (0: off)"),
+    PriorRow(Sparsity, 0.0, "L1 (sparsity) weight, relative to ‖Aᵀb‖∞ (0: off)"),
+    PriorRow(SpectralSmoothness, 0.0,
+             "spectral smoothness weight (squared second differences along λ), relative to the Lipschitz constant (0: off)"),
+)
+
+
+def build_priors(backend, settings, references: Callable[[str], float]) -> list[Prior]:
+    """The active priors of ``settings``: each row's relative weight times ``references(prior.reference)``
+    (called only for the references an active weight needs)."""
+    priors = []
+    for row in PRIORS:
+        relative = getattr(settings, row.name)
+        if relative > 0:
+            prior = row.prior(backend, relative * references(row.prior.reference), settings)
+            if prior.active:
+                priors.append(prior)
+    return priors
+
+
+class ProxAverage:
+    """prox of Σ_i τ_i φ_i + ι_{≥0} as max(0, mean_i prox_i(z)), and the value Σ_i τ_i φ_i, for cubes of
+    ``shape`` on one backend (scratch allocated once)."""
+
+    def __init__(self, backend, priors: list[Prior], shape):
         self.backend = backend
-        self.regularizer = regularizer
-        self.terms = regularizer.active_terms()
-        self._scratch = backend.empty(shape) if len(self.terms) > 1 else None
+        self.priors = list(priors)
+        self._scratch = backend.empty(shape) if len(self.priors) > 1 else None
 
-    def __call__(self, z, step: float, out):
+    @property
+    def names(self) -> list[str]:
+        return [p.name for p in self.priors]
+
+    def prox(self, z, step: float, out):
         """out = max(0, mean_i prox_{step·τ_i φ_i}(z))."""
         be = self.backend
-        if not self.terms:
+        if not self.priors:
             return be.nonneg(z, out=out)
-        self._term(self.terms[0], z, step, out)
-        for term in self.terms[1:]:
-            be.axpy(1.0, self._term(term, z, step, self._scratch), out, out=out)
-        if len(self.terms) > 1:
-            be.scale(1.0 / len(self.terms), out, out=out)
+        if len(self.priors) == 1:
+            return self.priors[0].prox_nonneg(z, step, out)
+        self.priors[0].prox(z, step, out)
+        for prior in self.priors[1:]:
+            be.axpy(1.0, prior.prox(z, step, self._scratch), out, out=out)
+        be.scale(1.0 / len(self.priors), out, out=out)
         return be.nonneg(out, out=out)
 
-    def _term(self, term: str, z, step: float, out):
-        be, reg = self.backend, self.regularizer
-        if term == "tv":
-            return be.haar_tv(z, step * reg.tv, reg.axis_weights, out=out)
-        if term == "lowrank":
-            return prox_lowrank(be, z, step * reg.lowrank, out=out)
-        return be.soft(z, step * reg.l1, out=out)
+    def value(self, x) -> float:
+        """Σ_i τ_i φ_i(x) (x ≥ 0 assumed: the indicator is 0)."""
+        return float(sum(prior.value(x) for prior in self.priors))
+
+    def fused_subspace(self) -> Callable | None:
+        """The one prior's fused subspace prox ``(c, basis, step, out)``, or None (several priors or none)."""
+        return self.priors[0].subspace_prox if len(self.priors) == 1 else None

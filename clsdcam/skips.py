@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .convolution import seen_bands
+from .backends.host_convolution import seen_bands
 from .errors import shape_text
 from .geometry import FieldGeometry, centred_geometry, support_geometry
 

@@ -1,12 +1,14 @@
 """Reconstruction: one measurement + a calibration -> a hyperspectral cube.
 
-    argmin_{v ≥ 0} ½‖b − Av‖² + τ₁·TV_w(v) + τ₂·‖V‖_* + τ₃·‖v‖₁     by FISTA with step 1/L.
+    argmin_{v ≥ 0} ½‖b − Av‖² + Σ_i τ_i·φ_i(v)     by FISTA with step 1/L
 
-Units. The measurement is used as given. Internally it is divided by s = max|b|, and the
-user's weights are relative: τ₁ and τ₃ are fractions of ‖Aᵀb‖_∞ (the weight above which
-an L1 prior would zero the cube), τ₂ a fraction of σ₁(Aᵀb), the largest singular value of
-the pixels×bands unfolding of Aᵀb. So scaling the measurement by s scales the cube by s,
-and the same weights suit any PSF or filter normalisation.
+with the priors φ_i of :mod:`clsdcam.priors` (TV by default).
+
+Units. The measurement is used as given. Internally it is divided by s = max|b| (the solver's
+units: FISTA's records, objective and checkpoints are all in them); the result's cube and history
+are turned back into data units here, at the edge. The user's weights are relative to the data
+(each prior's reference, see :mod:`clsdcam.priors`), so scaling the measurement by s scales the
+cube by s, and the same weights suit any PSF or filter normalisation.
 
 Skips (``skip=True``, the default; ``skip=False`` is the full solver: the paper's field, every
 band, every iteration in band space): the support-sized field, no FFTs for bands no filter
@@ -15,8 +17,8 @@ Each is reported in ``Result.attrs["skips"]`` with the FFT work it saved.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from typing import Callable
 
 import numpy as np
@@ -24,58 +26,16 @@ import numpy as np
 from . import __version__
 from .backends import get_backend
 from .errors import InputError, shape_text
-from .io import require_finite
 from .fista import Fista, Rules
+from .io import require_finite
 from .model import ForwardModel
-from .phases import Phases, Tracker
-from .priors import Prox, Regularizer, singular_values
+from .phases import Phases, Tracker, in_data_units
+from .priors import PRIORS, ProxAverage, build_priors, singular_values
 from .problem import Problem
+from .settings import Settings
 from .skips import bands_line, field_line, plan_geometry, terms_line
 
-DEFAULT_ITERS = 300
-DEFAULT_TV = 1e-3  # tuned on the simulated target and LED scenes (README, "Choosing --tv")
-DEFAULT_TOL = 0.0
-
-
-@dataclass(frozen=True)
-class Settings:
-    """Solver settings; weights are relative to the data (see the module docstring)."""
-
-    iters: int = DEFAULT_ITERS
-    tv: float = DEFAULT_TV
-    tv_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)  # x, y, λ
-    lowrank: float = 0.0
-    l1: float = 0.0
-    tol: float = DEFAULT_TOL
-    plateau: float = 0.0           # stop when F fell by less than this (relative) between checkpoints
-    skip: bool = True              # skip what the scene doesn't need (False: the full solver)
-    rank: int = 0                  # spectral basis vectors: 0 = automatic, ≥ K = no subspace
-    dtype: str = "float32"
-    objective_every: int = 10      # F(x) evaluated (and the best iterate kept) this often
-    restart: bool = True           # adaptive momentum restart (O'Donoghue–Candès)
-    step_scale: float = 1.0        # step = step_scale / L; > 1 only to test the back-off
-    full_field: bool = False
-
-    def __post_init__(self):
-        object.__setattr__(self, "tv_weights", tuple(float(w) for w in self.tv_weights))
-        _require(isinstance(self.iters, (int, np.integer)) and self.iters >= 1, f"--iters {self.iters}: must be an integer ≥ 1")
-        _require(_finite_nonneg(self.step_scale) and self.step_scale > 0, f"step_scale {self.step_scale}: must be > 0")
-        _require(isinstance(self.rank, (int, np.integer)) and self.rank >= 0, f"--rank {self.rank}: must be an integer ≥ 0")
-        for name in ("tv", "lowrank", "l1", "tol", "plateau"):
-            value = getattr(self, name)
-            _require(_finite_nonneg(value), f"--{name} {value}: must be a finite number ≥ 0")
-        _require(len(self.tv_weights) == 3 and all(_finite_nonneg(w) for w in self.tv_weights),
-                 f"--tv-weights {self.tv_weights}: expected three finite numbers ≥ 0 (x, y, λ)")
-        _require(self.objective_every >= 1, f"objective_every {self.objective_every}: must be ≥ 1")
-
-
-def _finite_nonneg(value) -> bool:
-    return isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value >= 0
-
-
-def _require(condition: bool, message: str):
-    if not condition:
-        raise InputError(message)
+__all__ = ["Result", "Settings", "Solver", "reconstruct"]
 
 
 @dataclass
@@ -106,9 +66,10 @@ class Solver:
     """One calibration on one backend: the model, its Lipschitz constant and buffers, built once."""
 
     def __init__(self, calibration, backend="numpy", device: str | None = None, settings: Settings | None = None,
-                 fft: str = "auto"):
+                 fft: str = "auto", path: str = "auto"):
         self.settings = settings or Settings()
-        self.backend = get_backend(backend, self.settings.dtype, device, fft) if isinstance(backend, str) else backend
+        self.backend = get_backend(backend, self.settings.dtype, device, fft, path) if isinstance(backend, str) \
+            else backend
         self.calibration = calibration
         self.geometry = plan_geometry(calibration.psf, self.backend, self.settings.skip)
         self._check_memory()
@@ -131,24 +92,25 @@ class Solver:
             return self._result(self.model.embed(np.zeros(self._cube_window_shape())), 1.0, [], "zero measurement")
         be, s = self.backend, self.settings
         self.b = be.to_device(b / scale)
-        regularizer = self._regularizer()
-        problem = self.band_problem(regularizer)
+        priors = build_priors(be, s, DataReferences(self).value)
+        problem = self.band_problem(priors)
         loop = Fista(be, self._start(x0, scale), step=s.step_scale / self.lipschitz, objective=problem.objective,
                      rules=Rules(tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart))
         tracker = Tracker(self.model, scale, snapshots, progress)
-        tracker.report.lines += [line for line in (field_line(self.geometry), self._bands_line(),
-                                                   terms_line(regularizer.inactive_terms())) if line]
-        phases = Phases(self, loop, tracker, regularizer)
+        off = [row.name for row in PRIORS if row.name not in {p.name for p in priors}]
+        tracker.report.lines += [line for line in (field_line(self.geometry), self._bands_line(), terms_line(off))
+                                 if line]
+        phases = Phases(self, loop, tracker, priors)
         reason, problem = phases.run(problem, warm_started=x0 is not None)
         tracker.report.lines += [line for line in (phases.refreshes_line(),) if line]
-        out = self._result(problem.solution(loop.x), scale, loop.history, reason, regularizer, loop.step, tracker)
+        out = self._result(problem.solution(loop.x), scale, loop.history, reason, priors, loop.step, tracker)
         out.snapshots = tracker.kept
         return out
 
-    def band_problem(self, regularizer: Regularizer) -> Problem:
+    def band_problem(self, priors: list) -> Problem:
         """The problem on the band cube (the full problem)."""
-        prox = Prox(self.backend, regularizer, self.model.cube_shape)
-        return Problem(self.model, self.b, prox, lambda x: regularizer.value(self.backend, x), self.model.n_bands)
+        average = ProxAverage(self.backend, priors, self.model.cube_shape)
+        return Problem(self.model, self.b, average.prox, average.value, self.model.n_bands)
 
     # ---- pieces -------------------------------------------------------------------------
     def _check_memory(self):
@@ -181,24 +143,17 @@ class Solver:
             raise InputError(f"measurement {shape_text(b.shape)} does not match calibration {shape_text(self.model.sensor_shape)}")
         return require_finite(b, "measurement")
 
-    def _regularizer(self) -> Regularizer:
-        """Absolute weights: τ₁, τ₃ times ‖Aᵀb‖_∞ and τ₂ times σ₁(Aᵀb), for the normalised b."""
-        s, be = self.settings, self.backend
-        atb = self.model.adjoint(self.b)
-        data_scale = be.amax(atb)
-        sigma1 = float(singular_values(be, atb).max()) if s.lowrank > 0 else 0.0
-        return Regularizer(tv=s.tv * data_scale, tv_weights=s.tv_weights, lowrank=s.lowrank * sigma1,
-                           l1=s.l1 * data_scale)
-
-    def _result(self, x, scale, history, reason, regularizer: Regularizer | None = None, step: float = 0.0,
+    def _result(self, x, scale, history, reason, priors: list | None = None, step: float = 0.0,
                 tracker: Tracker | None = None) -> Result:
         model = self.model
         cube = (model.window(x) * scale).astype(np.float32)
         full = (self.backend.to_host(x) * scale).astype(np.float32) if self.settings.full_field else None
+        history = [in_data_units(record, scale) for record in history]
         attrs = {
             **{k: v for k, v in asdict(self.settings).items()},
             "backend": self.backend.name,
             "device": self.backend.device_name,
+            "path": self.backend.path,
             "fft_engine": self.backend.fft_engine,
             "iterations": len(history),
             "stop_reason": reason,
@@ -208,7 +163,7 @@ class Solver:
             "data_scale": scale,
             "field_shape": model.field_shape,
             "window_offset": model.offset,
-            "active_priors": ",".join(regularizer.active_terms()) if regularizer else "",
+            "active_priors": ",".join(p.name for p in priors or ()),
             "skips": tracker.report.summary() if tracker else "",
             "fft_work_saved": tracker.report.saved if tracker else 0.0,
             "final_rank": history[-1]["rank"] if history else model.n_bands,
@@ -219,8 +174,36 @@ class Solver:
                       attrs=attrs, full_field=full)
 
 
+class DataReferences:
+    """What a relative prior weight of 1 means for the current (normalised) measurement, each computed on
+    first use: ``atb_max`` = ‖Aᵀb‖_∞, ``atb_sigma1`` = σ₁(Aᵀb), ``lipschitz`` = L (see :mod:`clsdcam.priors`)."""
+
+    def __init__(self, solver: Solver):
+        self.solver = solver
+
+    def value(self, name: str) -> float:
+        return float(getattr(self, name))
+
+    @cached_property
+    def atb(self):
+        return self.solver.model.adjoint(self.solver.b)
+
+    @cached_property
+    def atb_max(self) -> float:
+        return self.solver.backend.amax(self.atb)
+
+    @cached_property
+    def atb_sigma1(self) -> float:
+        return float(singular_values(self.solver.backend, self.atb).max())
+
+    @property
+    def lipschitz(self) -> float:
+        return self.solver.lipschitz
+
+
 def reconstruct(measurement, calibration, backend="numpy", device: str | None = None, x0=None,
-                progress: Callable[[dict], None] | None = None, fft: str = "auto", **settings) -> Result:
+                progress: Callable[[dict], None] | None = None, fft: str = "auto", path: str = "auto",
+                **settings) -> Result:
     """Reconstruct a cube from one measurement; ``settings`` are the fields of ``Settings``."""
-    solver = Solver(calibration, backend=backend, device=device, settings=Settings(**settings), fft=fft)
+    solver = Solver(calibration, backend=backend, device=device, settings=Settings(**settings), fft=fft, path=path)
     return solver.solve(measurement, x0=x0, progress=progress)

@@ -7,9 +7,9 @@ With B (K × r, orthonormal columns) and v = B·c (c: r coefficient images on th
 
 so A·B is the same kind of operator with r "bands" of filters G: forward and adjoint need 4r
 FFTs instead of 4K, and its Lipschitz constant ‖AB‖² ≤ ‖A‖² allows longer steps. The prox
-stays in band space, c⁺ = Bᵀ·prox_g(B·c) (TV and non-negativity act on the spectra; the
-default TV-only prox is fused, ``backend.subspace_tv``), so the iterates are exactly the
-full problem's restricted to span(B).
+stays in band space, c⁺ = Bᵀ·prox_g(B·c) (the priors and non-negativity act on the spectra; a
+lone prior with a fused form, as TV's ``backend.subspace_tv``, runs fused), so the iterates are
+exactly the full problem's restricted to span(B).
 
 The basis comes from the spectra the solver has found so far: the leading eigenvectors of
 the K × K Gram matrix of its iterate (the pixels × bands unfolding's right singular vectors).
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .priors import Prox, Regularizer
+from .priors import ProxAverage
 
 
 @dataclass(frozen=True)
@@ -48,7 +48,7 @@ class Spectra:
 class SpectralSubspace:
     """A, the prox and the objective for cubes v = B·c, on one backend; built once per basis."""
 
-    def __init__(self, model, basis: np.ndarray, regularizer: Regularizer, filters: np.ndarray, start=None):
+    def __init__(self, model, basis: np.ndarray, priors: list, filters: np.ndarray, start=None):
         """``start``: a coefficient cube to begin the power iteration for L from (a related basis's)."""
         be = self.backend = model.backend
         self.basis = np.asarray(basis, dtype=np.float64)
@@ -56,12 +56,10 @@ class SpectralSubspace:
         self.full_model = model
         self.model = model.with_filters(np.einsum("kj,khw->jhw", self.basis, filters).astype(be.dtype))
         self.lipschitz = self.model.lipschitz(start=start)
-        self.regularizer = regularizer
         self.cube_shape = self.model.cube_shape
         self._expanded = be.empty(model.cube_shape)
-        terms = regularizer.active_terms()
-        self._fused = terms == ["tv"]
-        self._prox = None if self._fused else Prox(be, regularizer, model.cube_shape)
+        self._average = ProxAverage(be, priors, model.cube_shape)
+        self._fused = self._average.fused_subspace()
         self._proxed = None if self._fused else be.empty(model.cube_shape)
 
     def project(self, v):
@@ -74,15 +72,14 @@ class SpectralSubspace:
 
     def prox(self, c, step: float, out):
         """c⁺ = Bᵀ·prox_{step·g}(B·c)."""
-        be, reg = self.backend, self.regularizer
         if self._fused:
-            return be.subspace_tv(c, self.basis, step * reg.tv, reg.axis_weights, out=out)
-        self._prox(self.expand(c), step, out=self._proxed)
-        return be.bandmix(self._proxed, self.basis.T, out=out)
+            return self._fused(c, self.basis, step, out)
+        self._average.prox(self.expand(c), step, out=self._proxed)
+        return self.backend.bandmix(self._proxed, self.basis.T, out=out)
 
     def penalty(self, c) -> float:
         """g(B·c)."""
-        return self.regularizer.value(self.backend, self.expand(c))
+        return self._average.value(self.expand(c))
 
     def transforms(self) -> int:
         return self.model.transforms()

@@ -8,7 +8,8 @@ import pytest
 import scipy.ndimage as ndi
 from scipy.signal import correlate2d
 
-from clsdcam import analysis, cli_analyze, sim
+from clsdcam import analyses, analysis, sim
+from clsdcam.cli import analyze as cli_analyze
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.metrics import psnr
 from clsdcam.model import ForwardModel
@@ -200,6 +201,7 @@ def test_analyze_all_through_a_parser(tmp_path, capsys, monkeypatch):
     table = capsys.readouterr().out
     assert "| autocorrelation resolution, simulated caustic |" in table and "within 5 nm" in table
     assert "skipped: psf/spectraldiffuserscope_psf.npy not present" in table
+    assert cli_analyze.ANALYSES == analyses.ANALYSES
     for name in cli_analyze.ANALYSES:
         assert (out / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
         assert json.loads((out / f"{name}.json").read_text())["seconds"] >= 0

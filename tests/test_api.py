@@ -1,4 +1,4 @@
-"""The public Python API of DESIGN.md, and a light import."""
+"""The public Python API (README, "Python"), and a light import."""
 import subprocess
 import sys
 

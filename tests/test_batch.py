@@ -1,7 +1,10 @@
 """Many frames: frame sources, one stream, Dask workers (embedded and external), killed workers,
 resumed and interrupted batches, failed frames."""
+import dataclasses
+import json
 import logging
 import os
+import pickle
 import socket
 import subprocess
 import sys
@@ -14,14 +17,12 @@ import tifffile
 from distributed import Client, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 
-import clsdcam.batch as batch
-from clsdcam.batch import BatchSpec, parts_dir, run_batch
-from clsdcam.calibration import Calibration, Preprocessing, preprocess
+from clsdcam.batch import BatchSpec, FrameSource, parts, parts_dir, predict, run_batch, stream
+from clsdcam.calibration import Calibration, PixelMask, Preprocessing, preprocess
 from clsdcam.cli import main
 from clsdcam.errors import InputError
-from clsdcam.frames import FrameSource
-from clsdcam.solver import Settings, reconstruct
-from clsdcam.video import simulate_video, write_video
+from clsdcam.sim.video import simulate_video, write_video
+from clsdcam.solver import Settings, Solver, reconstruct
 
 N_FRAMES = 8
 
@@ -112,17 +113,17 @@ def test_resume_computes_only_the_missing_frames(video, tmp_path):
 
 def test_an_interrupted_batch_resumes(video, tmp_path, monkeypatch):
     """Ctrl-C (a KeyboardInterrupt while frame 5 is read) keeps the finished chunks and nothing else."""
-    output, read = tmp_path / "out.h5", batch._read
+    output, read = tmp_path / "out.h5", stream._read
 
     def interrupted(source, i):
         if i == 5:
             raise KeyboardInterrupt
         return read(source, i)
 
-    monkeypatch.setattr(batch, "_read", interrupted)
+    monkeypatch.setattr(stream, "_read", interrupted)
     with pytest.raises(KeyboardInterrupt):
         run_batch(spec(video), output, workers=0, chunk=2)
-    monkeypatch.setattr(batch, "_read", read)
+    monkeypatch.setattr(stream, "_read", read)
     assert not output.exists() and not [p for p in parts_dir(output).iterdir() if p.name.startswith(".")]
     assert run_batch(spec(video), output, workers=0, chunk=2).computed_frames == 4
 
@@ -216,6 +217,52 @@ def test_warm_start_follows_a_constant_drift():
     """predict(x̂(t−2), x̂(t−1)) moves x̂(t−1) by the drift between them (here 2 px right, 1 px down)."""
     y, x = np.mgrid[:32, :40]
     blob = lambda cy, cx: np.stack([np.exp(-((y - cy) ** 2 + (x - cx) ** 2) / 8.0)] * 3).astype(np.float32)
-    np.testing.assert_allclose(batch.predict(blob(10, 12), blob(11, 14)), blob(12, 16), atol=0.02)
-    assert batch.predict(None, blob(11, 14)) is not None and batch.predict(blob(5, 5), blob(5, 5)) is not None
-    np.testing.assert_array_equal(batch.predict(blob(5, 5), blob(5, 5)), blob(5, 5))
+    np.testing.assert_allclose(predict(blob(10, 12), blob(11, 14)), blob(12, 16), atol=0.02)
+    assert predict(None, blob(11, 14)) is not None and predict(blob(5, 5), blob(5, 5)) is not None
+    np.testing.assert_array_equal(predict(blob(5, 5), blob(5, 5)), blob(5, 5))
+
+
+def test_the_fingerprint_hashes_canonical_json_not_pickle(monkeypatch):
+    """batch.json's fingerprint is the same for equal specs on any Python or NumPy (no pickle bytes) and differs
+    when anything that decides the cubes differs; its settings text holds every Settings field."""
+    def no_pickle(*args, **kwargs):
+        raise AssertionError("the fingerprint must not depend on pickle")
+
+    monkeypatch.setattr(pickle, "dumps", no_pickle)
+
+    def stamp(iters=30, dead=PixelMask.of(np.eye(3)), n=2):
+        return parts.stamp(BatchSpec(frames=("a.npy", "b.npy"), calibration="cal.h5",
+                                     preprocessing=Preprocessing(crop=(0, 3, 0, 3), dead_pixels=dead),
+                                     settings=Settings(iters=iters, tv_weights=(1, 2, 3))), n)
+
+    first = stamp()
+    assert stamp() == first and stamp(iters=np.int64(30)) == first  # a NumPy integer is the number it holds
+    for other in (stamp(iters=31), stamp(dead=PixelMask.of(np.ones((3, 3)))), stamp(n=3)):
+        assert other["fingerprint"] != first["fingerprint"]
+    settings = json.loads(first["settings"])
+    assert settings == json.loads(json.dumps(dataclasses.asdict(Settings(iters=30, tv_weights=(1, 2, 3)))))
+    assert set(settings) == {f.name for f in dataclasses.fields(Settings)}
+
+
+def test_one_spec_builds_its_solver_once_per_process_and_the_cache_is_bounded(video, tmp_path, monkeypatch):
+    built, init = [], Solver.__init__
+
+    def counting(self, *args, **kwargs):
+        built.append(self)
+        init(self, *args, **kwargs)
+
+    monkeypatch.setattr(Solver, "__init__", counting)
+    stream.cached_solver.cache_clear()
+
+    def chunk(iters, start, stop):
+        records = stream.solve_chunk(spec(video, iters=iters), start, stop, str(tmp_path / f"{iters}-{start}.h5"))
+        assert not any(r["error"] for r in records)
+
+    chunk(2, 0, 2)
+    chunk(2, 2, 4)  # the second chunk of the same spec reuses the solver
+    assert len(built) == 1
+    for iters in (3, 4, 5):
+        chunk(iters, 0, 1)
+    assert len(built) == 4 and stream.cached_solver.cache_info().currsize == stream.SOLVERS_KEPT == 2
+    chunk(2, 4, 5)  # the first spec's solver was evicted: built again
+    assert len(built) == 5

@@ -43,6 +43,18 @@ def test_scaling_the_measurement_scales_the_cube():
     np.testing.assert_allclose(scaled, base * 1e4, rtol=1e-5, atol=1e-6 * scaled.max())
 
 
+def test_stopping_rules_do_not_depend_on_the_measurements_units():
+    """FISTA's records stay in solver units (b / max|b|) while the result reports data units: the plateau rule
+    stops at the same iteration for b and 1000·b (it once compared a record rescaled in place by a callback
+    with a checkpoint in solver units, and stopped at iteration 20 for 1000·b but never for b)."""
+    sim = simulate(scene="leds", shape=(32, 48), n_bands=8, seed=0)
+    runs = [reconstruct(sim.measurement * factor, sim.calibration, iters=200, plateau=1e-6) for factor in (1.0, 1e3)]
+    assert runs[0].iterations == runs[1].iterations and runs[0].stop_reason == runs[1].stop_reason
+    first, second = ([r["objective"] for r in run.history if np.isfinite(r["objective"])] for run in runs)
+    np.testing.assert_allclose(second, np.array(first) * 1e6, rtol=1e-3)     # data units: ×1000²
+    np.testing.assert_allclose(runs[1].cube, runs[0].cube * 1e3, rtol=1e-3, atol=1e-4 * runs[1].cube.max())
+
+
 def test_excluding_saturated_pixels_recovers_a_clipped_measurement():
     from clsdcam.calibration import Preprocessing, preprocess
 

@@ -1,5 +1,5 @@
 """Field geometry: the PSF's measured support, the support-sized field, and the convention that A is a
-linear convolution with the PSF's centre pixel as origin on every field (DESIGN.md)."""
+linear convolution with the PSF's centre pixel as origin on every field (docs/conventions.md)."""
 import numpy as np
 import pytest
 from scipy.signal import fftconvolve

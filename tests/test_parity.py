@@ -1,12 +1,12 @@
 """OpenCL vs NumPy: every primitive, the forward model and a whole reconstruction.
 
-Runs on whatever OpenCL device the machine has (PoCL in CI, a GPU when one is lent) and on
-every FFT engine available there; skipped cleanly when there is no OpenCL platform.
+Runs on whatever OpenCL device the machine has (PoCL in CI, a GPU when one is lent), on both code
+paths a device can run (the host path on CPU devices) and every FFT engine of each; skipped cleanly
+when there is no OpenCL platform.
 Tolerances, relative to max|reference|: elementwise 1e-6, FFT-based 2e-6 + 5e-7·log10(N),
 reductions 1e-5.
 """
 import math
-from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -24,23 +24,30 @@ try:
 except InputError as exc:  # pragma: no cover - machines without any OpenCL driver
     pytest.skip(f"no OpenCL device: {exc}", allow_module_level=True)
 
+from clsdcam.backends.base import HOST_CODE  # noqa: E402
+from clsdcam.backends.cl_host import MappedHostCode  # noqa: E402
 from clsdcam.backends.fft import ReiknaFFT, available_engines  # noqa: E402
 from clsdcam.backends.opencl import OpenCLBackend  # noqa: E402
 
+CPU = bool(DEVICE.type & cl_devices.import_pyopencl().device_type.CPU)
 DTYPES = ["float32"] + (["float64"] if cl_devices.has_fp64(DEVICE) else [])
-ENGINES = available_engines(DEVICE) + ["reikna-unpacked"]
+# every FFT engine of every path this device runs: "host" is the host path (CPU devices), the others the device path
+ENGINES = (available_engines("host") if CPU else []) + available_engines("device") + ["reikna-unpacked"]
+DEFAULT_ENGINE = "host" if CPU else "reikna"
 K, FIELD, SENSOR, OFFSET = 3, (22, 30), (11, 15), (5, 7)
 ELEMENTWISE, REDUCTION = 1e-6, 1e-5
 
 _BACKENDS: dict = {}
 
 
-def opencl(dtype="float32", engine="auto", kahan=None) -> OpenCLBackend:
-    """One backend per (dtype, engine, accumulator) for the whole session (PoCL compiles slowly)."""
+def opencl(dtype="float32", engine=DEFAULT_ENGINE, kahan=None) -> OpenCLBackend:
+    """One backend per (dtype, engine, accumulator) for the whole session (PoCL compiles slowly); the engine
+    names the path: host for "host", device for the others."""
     key = (dtype, engine, kahan)
     if key not in _BACKENDS:
         base = "reikna" if engine == "reikna-unpacked" else engine
-        backend = OpenCLBackend(dtype, device=DEVICE, fft=base, kahan=kahan)
+        backend = OpenCLBackend(dtype, device=DEVICE, fft=base, path="host" if base == "host" else "device",
+                                kahan=kahan)
         if engine == "reikna-unpacked":
             backend.fft = ReiknaFFT(backend.kernels, pack=False)
             backend.fft_engine = "reikna-unpacked"
@@ -195,7 +202,7 @@ def test_float64_on_device_without_fp64_is_an_input_error(monkeypatch):
 
 def test_memory_check_names_sizes_and_remedies():
     be = opencl()
-    need = be.estimate_bytes((320, 448), (640, 896), 64)
+    need = cl_devices.problem_bytes((320, 448), (640, 896), 64)[0]
     assert need > 6 * 64 * 640 * 896 * 4
     with pytest.raises(InputError, match="MiB.*fewer bands"):
         be.check_memory(DEVICE.global_mem_size * 2)
@@ -239,7 +246,8 @@ def simulation():
 
 @pytest.mark.parametrize("engine", ENGINES)
 def test_convolution_with_unseen_bands_and_fused_step(engine):
-    """backend.convolution on OpenCL (mapped host pipeline or primitives) against NumPy's, bands 1 and 3 unseen."""
+    """The model's convolution on OpenCL (mapped host pipeline or primitives) against NumPy's, bands 1 and 3 unseen."""
+    from clsdcam.convolution import filtered_convolution
     from clsdcam.geometry import support_geometry, transfer_function
 
     rng = np.random.default_rng(8)
@@ -249,7 +257,7 @@ def test_convolution_with_unseen_bands_and_fused_step(engine):
     ref_be, be = NumpyBackend("float32"), opencl("float32", engine)
     geometry = support_geometry(psf, ref_be.fast_length)
     transfer = transfer_function(psf, geometry)
-    ref, got = (b.convolution(transfer, filters, geometry.field) for b in (ref_be, be))
+    ref, got = (filtered_convolution(b, transfer, filters, geometry.field) for b in (ref_be, be))
     v, y = (rng.standard_normal((5, *geometry.field)).astype(np.float32) for _ in range(2))
     r = rng.standard_normal(SENSOR).astype(np.float32)
     tolerance = fft_tolerance(geometry.voxels_per_band)
@@ -258,20 +266,28 @@ def test_convolution_with_unseen_bands_and_fused_step(engine):
     step = be.to_device(y)
     got.adjoint(be.to_device(r), step, step, 0.4)                     # out is y: the fused gradient step
     assert relative_error(be.to_host(step), ref.adjoint(r, np.empty_like(v), y, 0.4)) <= tolerance
+    apart = be.empty(v.shape)
+    got.adjoint(be.to_device(r), apart, be.to_device(y), 0.4)          # out apart from y
+    assert relative_error(be.to_host(apart), ref.adjoint(r, np.empty_like(v), y, 0.4)) <= tolerance
 
 
-@contextmanager
-def path(be: OpenCLBackend, host: bool):
-    """``be`` with its subspace_tv, gram, bandmix and tv_norm on the host's code over mapped buffers
-    (CPU devices' default) or on the kernels (other devices'), whichever this device uses by default."""
-    default, be.host_kernels = be.host_kernels, host
-    try:
-        yield be
-    finally:
-        be.host_kernels = default
+def test_the_path_decides_which_code_runs():
+    """Host path: the HOST_CODE primitives are the mapped host code and the FFT is pocketfft; device path:
+    kernels and a device FFT; asking for the host path on a GPU, or an engine of the other path, is refused."""
+    device = opencl("float32", "reikna")
+    assert device.path == "device" and device.fft_engine == "reikna"
+    assert not any(isinstance(getattr(getattr(device, name), "__self__", None), MappedHostCode) for name in HOST_CODE)
+    if CPU:
+        host = opencl("float32", "host")
+        assert host.path == "host" and host.fft_engine == "host"
+        assert all(isinstance(getattr(host, name).__self__, MappedHostCode) for name in HOST_CODE)
+        with pytest.raises(InputError, match="not an engine of the host path"):
+            OpenCLBackend("float32", device=DEVICE, fft="reikna", path="host")
+    with pytest.raises(InputError, match="not an engine of the device path"):
+        OpenCLBackend("float32", device=DEVICE, fft="host", path="device")
 
 
-# the primitives with a host path on CPU devices, on both paths; float32 sums of r and K products in another
+# the primitives with host code on the host path, on both paths; float32 sums of r and K products in another
 # order than BLAS's
 HOST_PATH_CASES = {"subspace_tv": 10 * ELEMENTWISE, "subspace_tv_weighted": 10 * ELEMENTWISE,
                    "bandmix": 10 * ELEMENTWISE, "bandmix_alias": 10 * ELEMENTWISE, "bandmix_expand": 10 * ELEMENTWISE,
@@ -279,37 +295,39 @@ HOST_PATH_CASES = {"subspace_tv": 10 * ELEMENTWISE, "subspace_tv_weighted": 10 *
                    "tv_norm_xy": REDUCTION}
 
 
-@pytest.mark.parametrize("host", [True, False])
+@pytest.mark.parametrize("engine", sorted({DEFAULT_ENGINE, "reikna"}))
 @pytest.mark.parametrize("case", HOST_PATH_CASES)
-def test_host_path_primitives_on_both_paths(case, host):
+def test_host_code_primitives_on_both_paths(case, engine):
     a = inputs("float32", seed=4)
-    with path(opencl("float32"), host) as be:
-        got = run(be, case, a)
+    got = run(opencl("float32", engine), case, a)
     assert relative_error(got, run(NumpyBackend("float32"), case, a)) <= HOST_PATH_CASES[case]
 
 
-def test_host_buffers_are_released_only_at_a_sync_point_once_unused():
-    """CPU devices: a buffer over NumPy memory outlives its last user until the queue drains."""
+def test_host_memory_of_a_dropped_buffer_is_kept_until_its_queued_work_is_done():
+    """CPU devices: a buffer over our NumPy memory, dropped by Python, keeps that memory until a marker queued at
+    its drop has completed (the queue's events decide, not reference counts); then it is let go."""
     be = opencl("float32")
     if be.allocator is None:
         pytest.skip("device memory of its own: the driver owns it")
-    be.allocator.drained()
-    held = len(be.allocator)
-    kept, dropped = be.to_device(np.ones(64, np.float32)), be.to_device(np.ones(64, np.float32))
+    be.queue.finish()
+    be.allocator.release_finished()
+    assert be.allocator.retiring() == 0
+    kept, dropped = be.to_device(np.ones(64, np.float32)), be.to_device(np.ones(1 << 20, np.float32))
+    be.scale(2.0, dropped, out=dropped)                        # work queued on it
     del dropped
-    assert len(be.allocator) == held + 2                       # not yet: no sync point since
-    assert be.vdot(kept, kept) == 64.0                         # a blocking read drains the queue
-    assert len(be.allocator) == held + 1 and be.to_host(kept).sum() == 64.0
+    assert be.allocator.retiring() == 1                        # its memory is held by the retirement marker
+    assert be.vdot(kept, kept) == 64.0                         # a blocking read: the queue has passed the marker
+    assert be.allocator.retiring() == 0 and be.to_host(kept).sum() == 64.0
 
 
 def test_dropped_temporaries_do_not_corrupt_later_results():
     """A device input dropped right after its kernel is queued (its host memory is ours on CPU devices) keeps
-    its memory until the queue drains: mixes of temporaries stay exact, call after call."""
+    its memory until the queue has done with it: mixes of temporaries stay exact, call after call."""
     ref, rng = NumpyBackend("float32"), np.random.default_rng(9)
-    with path(opencl("float32"), host=False) as be:                # the kernels: their inputs are dropped at once
-        for shape, rows in [((64, 300, 41), 6), ((64, 4, 4), 64)] * 3:
-            x, matrix = rng.standard_normal(shape).astype(np.float32), rng.standard_normal((rows, shape[0]))
-            assert relative_error(be.to_host(be.bandmix(be.to_device(x), matrix)), ref.bandmix(x, matrix)) <= 1e-5
+    be = opencl("float32", "reikna")                               # the kernels: their inputs are dropped at once
+    for shape, rows in [((64, 300, 41), 6), ((64, 4, 4), 64)] * 3:
+        x, matrix = rng.standard_normal(shape).astype(np.float32), rng.standard_normal((rows, shape[0]))
+        assert relative_error(be.to_host(be.bandmix(be.to_device(x), matrix)), ref.bandmix(x, matrix)) <= 1e-5
 
 
 @pytest.mark.parametrize("engine", ENGINES)

@@ -1,4 +1,4 @@
-"""Each prox against a brute-force minimisation on tiny inputs."""
+"""Each prox against a brute-force minimisation on tiny inputs; the prior table and the proximal average."""
 import itertools
 
 import numpy as np
@@ -6,7 +6,9 @@ import pytest
 from scipy.optimize import minimize_scalar
 
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.priors import Prox, Regularizer, prox_lowrank, singular_values
+from clsdcam.priors import (PRIORS, LowRank, ProxAverage, Sparsity, SpectralSmoothness, TotalVariation, build_priors,
+                            prox_lowrank, singular_values)
+from clsdcam.settings import Settings
 
 BE = NumpyBackend("float64")
 
@@ -116,19 +118,65 @@ def test_lowrank_prox_against_brute_force_nuclear_objective():
 def test_combined_prox_averages_terms_then_projects():
     rng = np.random.default_rng(5)
     z = rng.standard_normal((4, 5, 6))
-    reg = Regularizer(tv=0.2, tv_weights=(1.0, 2.0, 0.5), lowrank=0.3, l1=0.1)
+    settings = Settings(tv_weights=(1.0, 2.0, 0.5))
+    priors = [TotalVariation(BE, 0.2, settings), LowRank(BE, 0.3, settings), Sparsity(BE, 0.1, settings)]
     step = 0.5
     out = np.empty_like(z)
-    Prox(BE, reg, z.shape)(z, step, out)
-    expected = np.maximum(0, (BE.haar_tv(z, step * 0.2, reg.axis_weights) + prox_lowrank(BE, z, step * 0.3)
+    ProxAverage(BE, priors, z.shape).prox(z, step, out)
+    expected = np.maximum(0, (BE.haar_tv(z, step * 0.2, (0.5, 2.0, 1.0)) + prox_lowrank(BE, z, step * 0.3)
                               + BE.soft(z, step * 0.1)) / 3)
     np.testing.assert_allclose(out, expected, atol=1e-12)
 
 
 def test_zero_weight_terms_are_dropped():
-    assert Regularizer(tv=0.0, lowrank=0.0).active_terms() == []
-    assert Regularizer(tv=1.0, tv_weights=(0.0, 0.0, 0.0)).active_terms() == []
+    assert build_priors(BE, Settings(tv=0.0), lambda name: 1.0) == []
+    assert build_priors(BE, Settings(tv=1.0, tv_weights=(0.0, 0.0, 0.0)), lambda name: 1.0) == []
     z = np.array([[[-1.0, 2.0]]])
     out = np.empty_like(z)
-    Prox(BE, Regularizer(), z.shape)(z, 1.0, out)
+    ProxAverage(BE, [], z.shape).prox(z, 1.0, out)
     np.testing.assert_array_equal(out, [[[0.0, 2.0]]])
+
+
+def test_weights_are_relative_to_each_priors_reference():
+    """Each active prior's absolute weight is its relative weight times the reference it names (asked only
+    for the references an active prior needs)."""
+    asked = []
+
+    def references(name):
+        asked.append(name)
+        return {"atb_max": 10.0, "atb_sigma1": 100.0, "lipschitz": 1000.0}[name]
+
+    priors = build_priors(BE, Settings(tv=0.1, lowrank=0.2, l1=0.0, spectral=0.3), references)
+    assert [(p.name, p.weight) for p in priors] == [("tv", 1.0), ("lowrank", 20.0), ("spectral", 300.0)]
+    assert sorted(asked) == ["atb_max", "atb_sigma1", "lipschitz"]
+
+
+def test_every_prior_row_is_a_setting_and_a_flag():
+    from clsdcam.cli.options import build_parser
+
+    parser = build_parser()
+    for row in PRIORS:
+        assert getattr(Settings(), row.name) == row.default
+        args = parser.parse_args(["reconstruct", "m.npy", "--calibration", "c.h5", "-o", "o.h5", row.flag, "0.25"])
+        assert getattr(args, row.name) == 0.25
+
+
+def test_spectral_smoothness_prox_minimises_its_objective():
+    """prox of ½·t·Σ_p ‖D v_p‖² (second differences along λ) against scipy's minimiser, and its value."""
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(6)
+    z = rng.standard_normal((5, 2, 3))
+    step, weight = 0.7, 0.4
+    prior = SpectralSmoothness(BE, weight, Settings())
+    d = np.diff(np.eye(5), n=2, axis=0)                        # (K−2) × K second differences
+
+    def penalty(x):
+        return 0.5 * weight * np.sum((d @ x.reshape(5, -1)) ** 2)
+
+    brute = minimize(lambda x: 0.5 * np.sum((x - z.ravel()) ** 2) + step * penalty(x), z.ravel(), method="BFGS",
+                     options={"gtol": 1e-12}).x.reshape(z.shape)
+    np.testing.assert_allclose(prior.prox(z, step, np.empty_like(z)), brute, atol=1e-6)
+    assert prior.value(z) == pytest.approx(penalty(z.ravel()), rel=1e-12)
+    assert SpectralSmoothness(BE, 1.0, Settings()).value(np.ones((5, 2, 3)) * np.arange(5)[:, None, None]) == \
+        pytest.approx(0.0, abs=1e-12)                         # straight spectra cost nothing

@@ -6,6 +6,8 @@ from scipy.signal import fftconvolve
 
 from clsdcam import sim
 from clsdcam.errors import InputError
+from clsdcam.sim import filters as filter_module
+from clsdcam.sim import scenes
 
 SMALL = (48, 64)
 BANDS8 = sim.band_wavelengths(8)
@@ -96,7 +98,7 @@ def fwhm_of_main_lobe(grid: np.ndarray, curve: np.ndarray) -> float:
 
 def test_filter_fwhm_grows_from_6_nm_blue_to_23_nm_nir():
     grid = np.arange(340.0, 950.0, 0.05)
-    transmissions = sim.filter_transmissions(grid)
+    transmissions = filter_module.filter_transmissions(grid)
     fwhm = np.array([fwhm_of_main_lobe(grid, t) for t in transmissions])
     assert fwhm[0] == pytest.approx(6.0, abs=0.5)
     assert fwhm[-1] == pytest.approx(23.0, abs=1.0)
@@ -106,7 +108,7 @@ def test_filter_fwhm_grows_from_6_nm_blue_to_23_nm_nir():
 
 def test_filter_peaks_and_side_lobes():
     grid = np.arange(370.0, 900.0, 1.0)
-    transmissions = sim.filter_transmissions(grid)
+    transmissions = filter_module.filter_transmissions(grid)
     peaks = transmissions.max(axis=1)
     assert np.all((peaks > 0.55) & (peaks <= 1.0))
     # each peak on the grid point nearest its band centre: within half the 1 nm grid step
@@ -128,7 +130,7 @@ def test_filter_side_lobes_resemble_the_measured_sfa(shared_data):
         return (np.median(relative[peak_nm >= 750][:, (grid >= 450) & (grid <= 650)]),
                 np.median(relative[peak_nm <= 480][:, (grid >= 840) & (grid <= 880)]))
 
-    ours = side_lobes(sim.filter_transmissions(grid), sim.band_wavelengths(64))
+    ours = side_lobes(filter_module.filter_transmissions(grid), sim.band_wavelengths(64))
     theirs = side_lobes(measured["transmission"], measured["peak_nm"])
     for mine, real in zip(ours, theirs):
         assert real / 2 < mine < real * 2
@@ -151,9 +153,9 @@ def test_aligned_tile_repeats_every_16_pixels_exactly():
 
 
 def test_coverage_is_a_partition_blended_only_when_misaligned():
-    layout = sim.filter_layout(0)
-    aligned = sim.filter_coverage(SMALL, layout, 2.0, (0.0, 0.0), 0.0)
-    shifted = sim.filter_coverage(SMALL, layout, 2.0, (0.3, 0.45), 0.2)
+    layout = filter_module.filter_layout(0)
+    aligned = filter_module.filter_coverage(SMALL, layout, 2.0, (0.0, 0.0), 0.0)
+    shifted = filter_module.filter_coverage(SMALL, layout, 2.0, (0.3, 0.45), 0.2)
     for coverage in (aligned, shifted):
         np.testing.assert_allclose(coverage.sum(axis=0), 1.0)
     assert set(np.unique(aligned)) == {0.0, 1.0}
@@ -162,7 +164,7 @@ def test_coverage_is_a_partition_blended_only_when_misaligned():
 
 
 def test_each_pixel_responds_most_at_its_filters_centre():
-    layout = sim.filter_layout(5)
+    layout = filter_module.filter_layout(5)
     wavelengths = sim.band_wavelengths()
     filters = sim.filter_array(SMALL, wavelengths, seed=5, misalignment=(0.0, 0.0), rotation_deg=0.0)
     y, x = np.mgrid[0:SMALL[0], 0:SMALL[1]]
@@ -171,9 +173,9 @@ def test_each_pixel_responds_most_at_its_filters_centre():
 
 
 def test_misaligned_pixels_respond_most_at_their_dominant_filters_centre():
-    layout = sim.filter_layout(0)
+    layout = filter_module.filter_layout(0)
     wavelengths = sim.band_wavelengths()
-    coverage = sim.filter_coverage(SMALL, layout, 2.0, (0.3, 0.45), 0.2)
+    coverage = filter_module.filter_coverage(SMALL, layout, 2.0, (0.3, 0.45), 0.2)
     filters = sim.filter_array(SMALL, wavelengths)
     dominant = coverage.max(axis=0) > 0.6
     best_band = np.argmax(filters, axis=0)
@@ -191,7 +193,7 @@ def test_single_band_filter_array():
 def assert_valid_scene(cube, bands=8, shape=SMALL):
     assert cube.shape == (bands,) + shape and cube.dtype == np.float32
     assert cube.min() >= 0.0 and cube.max() == pytest.approx(1.0)
-    by, bx = sim.border_px(shape)
+    by, bx = scenes.border_px(shape)
     assert by >= 0.04 * shape[0] and bx >= 0.04 * shape[1]
     inside = np.zeros(shape, bool)
     inside[by:shape[0] - by, bx:shape[1] - bx] = True
@@ -238,8 +240,8 @@ def bounding_box(mask: np.ndarray) -> np.ndarray:
 
 
 def test_target_chart_has_several_bar_widths():
-    assert sim.bar_widths((142, 200)) == [1, 2, 3, 4, 6]
-    chart = sim.resolution_chart((60, 80))
+    assert scenes.bar_widths((142, 200)) == [1, 2, 3, 4, 6]
+    chart = scenes.resolution_chart((60, 80))
     columns_with_bars = chart.max(axis=0)
     assert chart.max() == 1.0 and columns_with_bars.sum() < 80
 
@@ -260,7 +262,7 @@ def test_leds_are_small_spots():
 
 def test_piecewise_regions_have_constant_spectra():
     cube = sim.make_scene("piecewise", SMALL, BANDS8, seed=6)
-    inner = cube[(slice(None),) + sim.inner_window(SMALL)].reshape(8, -1).T
+    inner = cube[(slice(None),) + scenes.inner_window(SMALL)].reshape(8, -1).T
     distinct = np.unique(inner, axis=0)
     assert 8 <= len(distinct) <= 12
     assert np.linalg.matrix_rank(distinct.astype(np.float64), tol=1e-4) == 8
@@ -285,12 +287,12 @@ def test_scene_too_small_for_its_chart_is_an_input_error():
 
 
 def test_realcube_from_samson(shared_data):
-    shared_data(sim.SAMSON)
+    shared_data(scenes.SAMSON)
     wavelengths = np.array([390.0, 395.0, 550.0, 650.0, 850.0])
     cube = sim.make_scene("realcube", SMALL, wavelengths)
     assert_valid_scene(cube, bands=5)
     np.testing.assert_array_equal(cube[0], cube[1])  # below 400.9 nm both clamp to the first band
-    inner = cube[(slice(None),) + sim.inner_window(SMALL)]
+    inner = cube[(slice(None),) + scenes.inner_window(SMALL)]
     assert (inner.max(axis=0) > 0).mean() > 0.99
 
 

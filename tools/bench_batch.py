@@ -25,8 +25,8 @@ import numpy as np
 from clsdcam.batch import BatchSpec, predict, run_batch
 from clsdcam.calibration import Preprocessing, preprocess
 from clsdcam.metrics import psnr
+from clsdcam.sim.video import simulate_video, write_video
 from clsdcam.solver import Settings, Solver
-from clsdcam.video import simulate_video, write_video
 
 EVERY = 5  # warm-start PSNR is checked every EVERY iterations
 

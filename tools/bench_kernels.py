@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Benchmark every backend primitive and one whole FISTA iteration, OpenCL vs NumPy.
 
-    python tools/bench_kernels.py [--size 320x448] [--bands 64] [--repeat 5] [--engine auto]
+    python tools/bench_kernels.py [--size 320x448] [--bands 64] [--repeat 5] [--path auto] [--engine auto]
                                   [--dtype float32] [--device SUBSTRING] [--no-numpy] [--json PATH]
 
 The problem is the sensor H×W with the paper's 2H×2W field and K bands. Each row is the
@@ -31,8 +31,9 @@ from clsdcam.backends.numpy import NumpyBackend  # noqa: E402
 from clsdcam.fista import Fista  # noqa: E402
 from clsdcam.geometry import transfer_function  # noqa: E402
 from clsdcam.model import ForwardModel  # noqa: E402
-from clsdcam.priors import Prox, Regularizer  # noqa: E402
-from clsdcam.problem import Problem as Objective  # noqa: E402
+from clsdcam.priors import ProxAverage, TotalVariation  # noqa: E402
+from clsdcam.problem import Problem  # noqa: E402
+from clsdcam.settings import Settings  # noqa: E402
 
 
 def parse_args(argv=None):
@@ -40,7 +41,8 @@ def parse_args(argv=None):
     parser.add_argument("--size", default="320x448", help="sensor HxW (field 2H x 2W)")
     parser.add_argument("--bands", type=int, default=64)
     parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--engine", default="auto", help="FFT engine: auto, host, reikna, vkfft")
+    parser.add_argument("--path", default="auto", help="code path: auto, host (CPU devices) or device (kernels)")
+    parser.add_argument("--engine", default="auto", help="FFT engine of the path: auto, host, reikna, vkfft")
     parser.add_argument("--dtype", default="float32")
     parser.add_argument("--device", default=None, help="OpenCL device name substring")
     parser.add_argument("--no-numpy", action="store_true", help="time the OpenCL backend only")
@@ -49,7 +51,7 @@ def parse_args(argv=None):
     return parser.parse_args(argv)
 
 
-class Problem:
+class Case:
     """Host data and per-backend device buffers for one geometry."""
 
     def __init__(self, sensor, bands: int, dtype):
@@ -68,7 +70,7 @@ class Problem:
                 "f": k * h * w * self.item, "s": h * w * self.item}
 
 
-def rows(be, p: Problem) -> dict:
+def rows(be, p: Case) -> dict:
     """name -> (callable running the primitive once on ``be``, bytes moved)."""
     n = p.sizes()
     model = ForwardModel(be, p.psf, p.filters)
@@ -112,12 +114,12 @@ def rows(be, p: Problem) -> dict:
     }
 
 
-def iteration(be, model, p: Problem):
+def iteration(be, model, p: Case):
     """One step of the solver's FISTA loop on its band-space problem (TV prox, no objective checks)."""
-    prox = Prox(be, Regularizer(tv=1e-3), model.cube_shape)
-    objective = Objective(model, be.to_device(np.ones(p.sensor)), prox, lambda x: 0.0, p.bands)
+    average = ProxAverage(be, [TotalVariation(be, 1e-3, Settings())], model.cube_shape)
+    problem = Problem(model, be.to_device(np.ones(p.sensor)), average.prox, average.value, p.bands)
     loop = Fista(be, be.to_device(p.cube * 0.01), step=1e-3)
-    return lambda: loop.run(objective.gradient_step, objective.prox, 1)
+    return lambda: loop.run(problem.gradient_step, problem.prox, 1)
 
 
 def median_seconds(run, finish, repeat: int) -> float:
@@ -134,7 +136,7 @@ def median_seconds(run, finish, repeat: int) -> float:
     return statistics.median(times)
 
 
-def bench(be, p: Problem, repeat: int, only) -> dict:
+def bench(be, p: Case, repeat: int, only) -> dict:
     finish = be.queue.finish if hasattr(be, "queue") else (lambda: None)
     results = {}
     for name, (run, nbytes) in rows(be, p).items():
@@ -154,13 +156,14 @@ def environment(be) -> dict:
             return None
 
     return {"device": be.device_name, "driver_version": be.device.driver_version, "opencl_version": be.device.version,
-            "fft_engine": be.fft_engine, "python": platform.python_version(),
+            "path": be.path, "fft_engine": be.fft_engine, "python": platform.python_version(),
             **{p: version(p) for p in ("numpy", "scipy", "pyopencl", "reikna", "pocl-binary-distribution", "pyvkfft")}}
 
 
 def markdown(results: dict, meta: dict) -> str:
     cl, ref = results["opencl"], results.get("numpy", {})
-    lines = [f"device: {meta['device']} (driver {meta['driver_version']}), FFT engine {meta['fft_engine']}; "
+    lines = [f"device: {meta['device']} (driver {meta['driver_version']}), {meta['path']} path, FFT engine "
+             f"{meta['fft_engine']}; "
              f"problem {meta['problem']}; median of {meta['repeat']}",
              "", "| primitive | OpenCL ms | OpenCL GB/s | NumPy ms | NumPy GB/s | speed-up |", "|---|---:|---:|---:|---:|---:|"]
     for name, row in cl.items():
@@ -180,9 +183,9 @@ def main(argv=None) -> int:
     from clsdcam.backends.opencl import OpenCLBackend
 
     sensor = tuple(int(v) for v in args.size.lower().split("x"))
-    problem = Problem(sensor, args.bands, np.dtype(args.dtype))
+    problem = Case(sensor, args.bands, np.dtype(args.dtype))
     only = set(args.only.split(",")) if args.only else None
-    be = OpenCLBackend(args.dtype, device=args.device, fft=args.engine)
+    be = OpenCLBackend(args.dtype, device=args.device, fft=args.engine, path=args.path)
     meta = {**environment(be), "problem": f"sensor {sensor[0]}x{sensor[1]}, field {problem.field[0]}x{problem.field[1]}, "
                                          f"{args.bands} bands, {args.dtype}", "repeat": args.repeat}
     results = {"opencl": bench(be, problem, args.repeat, only)}

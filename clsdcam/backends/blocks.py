@@ -9,30 +9,21 @@ OpenBLAS's own threads on top of ours made the subspace prox 2.5× slower on two
 """
 from __future__ import annotations
 
-import atexit
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
+from functools import lru_cache
 from typing import Callable
 
 import numpy as np
 
 BLOCK_BYTES = 2 << 20     # per array: measured best on a 2-core Zen 3 (512 KiB L2, 32 MiB L3), 64×576×800
 
-_POOLS: dict[int, ThreadPoolExecutor] = {}
-_BLAS: list = []        # the threadpoolctl controller, made on first use
 
-
-@atexit.register
-def _shutdown():
-    for pool in _POOLS.values():
-        pool.shutdown(wait=False)
-    _POOLS.clear()
-
-
+@lru_cache(maxsize=4)
 def _pool(workers: int) -> ThreadPoolExecutor:
-    if workers not in _POOLS:
-        _POOLS[workers] = ThreadPoolExecutor(workers, thread_name_prefix="clsdcam-blocks")
-    return _POOLS[workers]
+    """A pool of ``workers`` threads, kept for the few sizes in use (an evicted pool's idle threads exit
+    when it is collected)."""
+    return ThreadPoolExecutor(workers, thread_name_prefix="clsdcam-blocks")
 
 
 def rows_per_block(row_bytes: int) -> int:
@@ -63,13 +54,17 @@ def map_blocks(work: Callable[[int, int, dict], object], n_rows: int, row_bytes:
         return [r for results in _pool(len(parts)).map(walk, parts) for r in results]
 
 
+@lru_cache(maxsize=1)
+def _blas_controller():
+    """threadpoolctl's view of the loaded BLAS libraries (made on first use)."""
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
+
 def single_threaded_blas():
     """A context holding BLAS libraries to one thread (threadpoolctl), or nothing when none is loaded."""
-    if not _BLAS:
-        from threadpoolctl import ThreadpoolController
-
-        _BLAS.append(ThreadpoolController())
-    controller = _BLAS[0]
+    controller = _blas_controller()
     return controller.limit(limits=1, user_api="blas") if controller.select(user_api="blas").lib_controllers \
         else nullcontext()
 

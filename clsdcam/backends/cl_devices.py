@@ -1,4 +1,4 @@
-"""OpenCL devices: listing, choosing by name, one context and queue per device (cached).
+"""OpenCL devices: listing, choosing by name, one context and queue per device (a bounded cache).
 
 Every failure a user can meet here (no pyopencl, no driver, no matching device, no fp64,
 too little memory) is an :class:`~clsdcam.errors.InputError` with one line saying what
@@ -7,6 +7,7 @@ to do, so the CLI prints it and exits with code 2.
 from __future__ import annotations
 
 import os
+from functools import lru_cache
 
 import numpy as np
 
@@ -15,7 +16,7 @@ from ..errors import InputError
 INSTALL_HINT = ("install an OpenCL driver, e.g. the portable CPU driver PoCL: "
                 "pip install 'clsdcam[pocl]' (PyPI pocl-binary-distribution)")
 
-_CONTEXTS: dict = {}   # device -> (context, queue)
+CONTEXT_CACHE = 8      # (context, queue) pairs kept, one per device in use
 
 
 def import_pyopencl():
@@ -109,21 +110,17 @@ def choose_device(substring: str | None = None):
 def _pyopencl_ctx_device():
     cl = import_pyopencl()
     try:
-        context = cl.create_some_context(interactive=False)
+        return cl.create_some_context(interactive=False).devices[0]
     except Exception as exc:  # noqa: BLE001 - pyopencl raises several types for a bad PYOPENCL_CTX
         raise InputError(f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']!r}: {exc}") from exc
-    device = context.devices[0]
-    _CONTEXTS.setdefault(device, (context, cl.CommandQueue(context)))
-    return device
 
 
+@lru_cache(maxsize=CONTEXT_CACHE)
 def context_queue(device):
     """The (context, in-order queue) of ``device``, created on first use and cached."""
-    if device not in _CONTEXTS:
-        cl = import_pyopencl()
-        context = cl.Context(devices=[device])
-        _CONTEXTS[device] = (context, cl.CommandQueue(context))
-    return _CONTEXTS[device]
+    cl = import_pyopencl()
+    context = cl.Context(devices=[device])
+    return context, cl.CommandQueue(context)
 
 
 def require_dtype(device, dtype) -> None:
@@ -152,11 +149,6 @@ def problem_bytes(sensor_shape, field_shape, n_bands: int, dtype="float32") -> t
     fft_work = 2 * ((n_bands + 1) // 2) * hp * wp * 2 * item
     total = FIELD_BUFFERS * field + spectrum + n_bands * h * w * item + fft_work + 8 * h * w * item
     return total, max(field, spectrum, fft_work // 2)
-
-
-def estimate_bytes(sensor_shape, field_shape, n_bands: int, dtype="float32") -> int:
-    """Device memory one solve needs, in bytes (see :func:`problem_bytes`)."""
-    return problem_bytes(sensor_shape, field_shape, n_bands, dtype)[0]
 
 
 def check_memory(device, needed: int, largest: int = 0) -> None:

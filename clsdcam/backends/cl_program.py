@@ -2,12 +2,13 @@
 
 Every kernel is templated on the real type by ``-DREAL=float|double`` (``REAL2`` its complex
 pair); reductions accumulate in ``ACC`` = double when the device has fp64, else float with
-Kahan compensation. One program holds every family; it is built on first use and cached in a
-module-level dict keyed by (context, dtype, accumulator), so PoCL's slow compiles happen once.
+Kahan compensation. One program holds every family; it is built on first use and kept in a
+bounded cache keyed by (context, dtype, accumulator), so PoCL's slow compiles happen once.
 """
 from __future__ import annotations
 
 import importlib.resources
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +25,7 @@ LOCAL_X_CPU = 256     # CPUs (PoCL): one row of 256 work items, which PoCL vecto
 LOCAL_1D = 256        # work-group size of 1-D launches and reductions on GPUs (a power of two)
 LOCAL_CPU = 1024      # CPUs (PoCL): large groups amortise the per-group scheduling cost
 
-_SOURCE: str | None = None
-_PROGRAMS: dict = {}
+PROGRAM_CACHE = 8     # built programs kept: (context, dtype, accumulator) combinations in use
 
 
 def kernel_dir() -> Path:
@@ -39,14 +39,12 @@ def kernel_dir() -> Path:
     return Path(__file__).resolve().parents[2] / "kernels"
 
 
+@lru_cache(maxsize=1)
 def source() -> str:
     """All kernel families concatenated in build order (read once)."""
-    global _SOURCE
-    if _SOURCE is None:
-        root = kernel_dir()
-        _SOURCE = "\n".join(f"/* ---- {name}.cl ---- */\n" + (root / f"{name}.cl").read_text(encoding="utf-8")
-                            for name in FAMILIES)
-    return _SOURCE
+    root = kernel_dir()
+    return "\n".join(f"/* ---- {name}.cl ---- */\n" + (root / f"{name}.cl").read_text(encoding="utf-8")
+                     for name in FAMILIES)
 
 
 def accumulator(device, kahan: bool | None = None) -> np.dtype:
@@ -57,16 +55,18 @@ def accumulator(device, kahan: bool | None = None) -> np.dtype:
 
 def program(context, dtype, acc) -> cl.Program:
     """The built program for (context, dtype, accumulator), cached."""
-    key = (context, np.dtype(dtype), np.dtype(acc))
-    if key not in _PROGRAMS:
-        real, real2 = TYPES[np.dtype(dtype)]
-        options = [f"-DREAL={real}", f"-DREAL2={real2}", f"-DACC={TYPES[np.dtype(acc)][0]}"]
-        if any(has_fp64(d) for d in context.devices) and (np.dtype(acc) == np.float64 or real == "double"):
-            options.append("-DHAVE_FP64")
-        if np.dtype(acc) == np.float32:
-            options.append("-DKAHAN")
-        _PROGRAMS[key] = cl.Program(context, source()).build(options=options)
-    return _PROGRAMS[key]
+    return _built(context, np.dtype(dtype), np.dtype(acc))
+
+
+@lru_cache(maxsize=PROGRAM_CACHE)
+def _built(context, dtype: np.dtype, acc: np.dtype) -> cl.Program:
+    real, real2 = TYPES[dtype]
+    options = [f"-DREAL={real}", f"-DREAL2={real2}", f"-DACC={TYPES[acc][0]}"]
+    if any(has_fp64(d) for d in context.devices) and (acc == np.float64 or real == "double"):
+        options.append("-DHAVE_FP64")
+    if acc == np.float32:
+        options.append("-DKAHAN")
+    return cl.Program(context, source()).build(options=options)
 
 
 def round_up(n: int, multiple: int) -> int:

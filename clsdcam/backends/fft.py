@@ -5,17 +5,16 @@ One interface, :class:`RealFFT`:
     forward(x, out)   x (K, Hp, Wp) real     -> out (K, Hp, Wp//2+1) complex  (= rfft2)
     inverse(X, out)   X (K, Hp, Wp//2+1)     -> out (K, Hp, Wp) real          (= irfft2, 1/N normalised)
 
-Engines (``make_fft(queue, engine)``):
+Engines (``make_fft(queue, path, engine)``; which path runs which engine is the rule of ``base.py``):
 
-* ``host``   pocketfft (scipy.fft) on the host, on buffers mapped with ``enqueue_map_buffer``;
-  zero-copy on CPU devices, whose arrays the backend allocates with ALLOC_HOST_PTR.
+* ``host``   pocketfft (scipy.fft) on the host, on mapped buffers (the host path: zero-copy on CPU
+  devices, whose buffers the backend allocates over NumPy memory, see ``cl_memory``).
 * ``reikna`` reikna's complex FFT on the device plus our ``fft.cl`` kernels: two real bands
   packed into one complex transform, z = x_a + i·x_b, unpacked by Hermitian symmetry
   X_a = (Z[κ] + conj Z[−κ])/2, X_b = (Z[κ] − conj Z[−κ])/(2i) (``pack=False``: one band each).
 * ``vkfft``  pyvkfft's native R2C/C2R, when pyvkfft is installed.
 
-``auto`` = host on CPU devices, vkfft on other devices when importable, else reikna.
-Plans are built on first use for a shape and cached per (context, shape, dtype).
+Plans are built on first use for a shape and kept in bounded caches (the few most recent).
 Each engine says which lengths it transforms fast (``fast_length``): 5-smooth for pocketfft's
 real transforms, 7-smooth for VkFFT, powers of two for reikna (radix 2 only; any other length
 goes through Bluestein's algorithm at a multiple of the cost).
@@ -24,26 +23,25 @@ from __future__ import annotations
 
 import atexit
 import os
-from contextlib import contextmanager
+from functools import lru_cache
 
 import numpy as np
-import pyopencl as cl
 import pyopencl.array as cla
 import scipy.fft
 
 from ..errors import InputError
+from .base import DEVICE_ENGINES, check_engine
+from .cl_memory import mapped
 from .cl_program import Kernels
 
-ENGINES = ("auto", "host", "reikna", "vkfft")
-_PLANS: dict = {}       # (engine, context, shape, dtype) -> plan
-_THREADS: dict = {}     # queue -> reikna Thread
+PLAN_CACHE = 8          # FFT plans kept (per engine), the most recently used
 
 
 @atexit.register
 def _release_plans():
     """Free cached plans while modules are still alive (reikna's finalisers fail at interpreter teardown)."""
-    _PLANS.clear()
-    _THREADS.clear()
+    for cached in (_reikna_plan, _vkfft_app, reikna_thread):
+        cached.cache_clear()
 
 
 class RealFFT:
@@ -81,16 +79,6 @@ def smooth_length(n: int, primes=(2, 3, 5, 7)) -> int:
 
 # ---- host (pocketfft on mapped buffers) -------------------------------------------------------
 
-@contextmanager
-def mapped(queue, array, flags):
-    """The host view of a device array for the duration of the block (waits for queued work)."""
-    host, _ = cl.enqueue_map_buffer(queue, array.base_data, flags, array.offset, array.shape, array.dtype)
-    try:
-        yield host
-    finally:
-        host.base.release(queue)
-
-
 class HostFFT(RealFFT):
     """scipy.fft (pocketfft, ``workers`` threads) on mapped device buffers: for CPU devices."""
 
@@ -104,14 +92,12 @@ class HostFFT(RealFFT):
         return scipy.fft.next_fast_len(int(n), real=True)
 
     def forward(self, x, out):
-        with mapped(self.queue, x, cl.map_flags.READ) as src, \
-                mapped(self.queue, out, cl.map_flags.WRITE_INVALIDATE_REGION) as dst:
+        with mapped(self.queue, x, "r") as src, mapped(self.queue, out, "w") as dst:
             dst[...] = scipy.fft.rfft2(src, workers=self.workers)
         return out
 
     def inverse(self, spectrum, out):
-        with mapped(self.queue, spectrum, cl.map_flags.READ) as src, \
-                mapped(self.queue, out, cl.map_flags.WRITE_INVALIDATE_REGION) as dst:
+        with mapped(self.queue, spectrum, "r") as src, mapped(self.queue, out, "w") as dst:
             dst[...] = scipy.fft.irfft2(src, s=out.shape[-2:], workers=self.workers)
         return out
 
@@ -132,18 +118,9 @@ class ReiknaFFT(RealFFT):
         return smooth_length(n, (2,))
 
     def _plan(self, field_shape):
-        """(compiled FFT, complex work array (P, Hp, Wp)) for a (K, Hp, Wp) field, built once."""
+        """(compiled FFT, complex work array (P, Hp, Wp)) for a (K, Hp, Wp) field."""
         k, hp, wp = field_shape
-        shape = (-(-k // self.per_transform), hp, wp)
-        key = ("reikna", self.queue.context, shape, self.cdtype)
-        if key not in _PLANS:
-            from reikna.core import Type
-            from reikna.fft import FFT
-
-            thread = reikna_thread(self.queue)
-            compiled = FFT(Type(self.cdtype, shape=shape), axes=(1, 2)).compile(thread)
-            _PLANS[key] = (compiled, cla.empty(self.queue, shape, self.cdtype))
-        return _PLANS[key]
+        return _reikna_plan(self.queue, (-(-k // self.per_transform), hp, wp), self.cdtype)
 
     def forward(self, x, out):
         k, hp, wp = x.shape
@@ -165,13 +142,22 @@ class ReiknaFFT(RealFFT):
         return out
 
 
-def reikna_thread(queue):
-    """One reikna Thread wrapping our queue (cached)."""
-    if queue not in _THREADS:
-        from reikna.cluda import ocl_api
+@lru_cache(maxsize=PLAN_CACHE)
+def _reikna_plan(queue, shape, cdtype):
+    """reikna's compiled complex FFT over axes (1, 2) of ``shape``, and its work array."""
+    from reikna.core import Type
+    from reikna.fft import FFT
 
-        _THREADS[queue] = ocl_api().Thread(queue)
-    return _THREADS[queue]
+    compiled = FFT(Type(cdtype, shape=shape), axes=(1, 2)).compile(reikna_thread(queue))
+    return compiled, cla.empty(queue, shape, cdtype)
+
+
+@lru_cache(maxsize=PLAN_CACHE)
+def reikna_thread(queue):
+    """One reikna Thread wrapping our queue."""
+    from reikna.cluda import ocl_api
+
+    return ocl_api().Thread(queue)
 
 
 # ---- VkFFT (optional) -------------------------------------------------------------------------
@@ -184,22 +170,21 @@ class VkFFT(RealFFT):
     def fast_length(self, n: int) -> int:
         return smooth_length(n, (2, 3, 5, 7))
 
-    def _app(self, real_shape):
-        key = ("vkfft", self.queue.context, tuple(real_shape), self.kernels.dtype)
-        if key not in _PLANS:
-            from pyvkfft.opencl import VkFFTApp
-
-            _PLANS[key] = VkFFTApp(tuple(real_shape), self.kernels.dtype, queue=self.queue, ndim=2,
-                                   r2c=True, inplace=False, norm=1)
-        return _PLANS[key]
-
     def forward(self, x, out):
-        self._app(x.shape).fft(x, out)
+        _vkfft_app(self.queue, tuple(x.shape), self.kernels.dtype).fft(x, out)
         return out
 
     def inverse(self, spectrum, out):
-        self._app(out.shape).ifft(spectrum, out)
+        _vkfft_app(self.queue, tuple(out.shape), self.kernels.dtype).ifft(spectrum, out)
         return out
+
+
+@lru_cache(maxsize=PLAN_CACHE)
+def _vkfft_app(queue, real_shape, dtype):
+    """pyvkfft's 2-D R2C/C2R plan over the last two axes of ``real_shape``, out of place, 1/N on the inverse."""
+    from pyvkfft.opencl import VkFFTApp
+
+    return VkFFTApp(real_shape, dtype, queue=queue, ndim=2, r2c=True, inplace=False, norm=1)
 
 
 def vkfft_available() -> bool:
@@ -210,28 +195,29 @@ def vkfft_available() -> bool:
     return True
 
 
-def available_engines(device) -> list[str]:
-    """The engines usable on ``device`` (host and reikna always; vkfft when installed)."""
-    return ["host", "reikna"] + (["vkfft"] if vkfft_available() else [])
+def available_engines(path: str) -> list[str]:
+    """The FFT engines usable on ``path``: host on the host path; reikna, and vkfft when installed, on the device path."""
+    if path == "host":
+        return ["host"]
+    return ["reikna"] + (["vkfft"] if vkfft_available() else [])
 
 
-def resolve_engine(device, engine: str = "auto") -> str:
-    """``auto`` -> host on CPU devices, vkfft if installed, else reikna; other names are checked."""
-    if engine not in ENGINES:
-        raise InputError(f"FFT engine {engine!r}: expected one of {', '.join(ENGINES)}")
+def resolve_engine(path: str, engine: str = "auto") -> str:
+    """``auto`` -> the path's engine (host; on the device path vkfft if installed, else reikna); others checked."""
+    if engine not in ("auto", "host") + DEVICE_ENGINES:
+        raise InputError(f"FFT engine {engine!r}: expected one of auto, host, {', '.join(DEVICE_ENGINES)}")
+    check_engine(path, engine)
     if engine == "auto":
-        if device.type & cl.device_type.CPU:
-            return "host"
-        return "vkfft" if vkfft_available() else "reikna"
+        return available_engines(path)[-1]
     if engine == "vkfft" and not vkfft_available():
-        raise InputError("FFT engine 'vkfft' needs pyvkfft (pip install pyvkfft)")
+        raise InputError("FFT engine 'vkfft' needs pyvkfft (pip install 'clsdcam[vkfft]', see the README)")
     return engine
 
 
-def make_fft(queue, engine: str = "auto", dtype="float32", kernels: Kernels | None = None) -> RealFFT:
-    """The FFT engine on ``queue`` for ``dtype`` (``engine`` as in :func:`resolve_engine`; its ``name`` says which)."""
+def make_fft(queue, path: str, engine: str = "auto", dtype="float32", kernels: Kernels | None = None) -> RealFFT:
+    """The FFT engine of ``path`` on ``queue`` for ``dtype`` (``engine`` as in :func:`resolve_engine`)."""
     kernels = kernels or Kernels(queue, dtype)
-    name = resolve_engine(queue.device, engine)
+    name = resolve_engine(path, engine)
     if name == "host":
         return HostFFT(kernels)
     if name == "vkfft":

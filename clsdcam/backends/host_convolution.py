@@ -1,6 +1,6 @@
 """A's filtered convolution on the host: bands in cache-sized chunks through pocketfft, pruned transforms.
 
-The same operator as :class:`clsdcam.convolution.PrimitiveConvolution` (see its docstring):
+The operator of :mod:`clsdcam.convolution` (which picks this pipeline on the host path):
 
     forward:   b = Σ_k F_k ⊙ [irfft2(Ĥ · rfft2(v_k))]_{0:H, 0:W}
     adjoint:   (Aᵀr)_k = irfft2(conj(Ĥ) · rfft2(pad₀(F_k ⊙ r)))
@@ -12,17 +12,19 @@ runs its row pass on the H rows it keeps only, and the adjoint's forward transfo
 pass on the H non-zero rows only (the rest of each row is zero padding, done by ``n=``).
 Bands no filter sees are skipped: they add nothing to b and get no gradient.
 
-Used by the NumPy backend on its arrays, and by the OpenCL backend on CPU devices on mapped
-device buffers (zero-copy).
+It runs on NumPy arrays: the NumPy backend's own, or an OpenCL CPU device's mapped buffers (zero-copy).
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.fft
 
-from ..convolution import seen_bands
-
 CHUNK_BYTES = 4 << 20      # spectrum bytes per chunk of bands: measured best at 64×576×800 (2 bands)
+
+
+def seen_bands(filters: np.ndarray) -> np.ndarray:
+    """(K,) bool: bands whose filter is non-zero somewhere (the others add nothing to b and get no gradient)."""
+    return np.any(np.asarray(filters) != 0, axis=tuple(range(1, np.ndim(filters))))
 
 
 def band_chunks(seen: np.ndarray, per_chunk: int) -> list[tuple[int, int]]:

@@ -1,13 +1,13 @@
 """The NumPy/SciPy reference primitives: readable first, every OpenCL kernel is checked against them.
 
-Layouts: a cube is ``(K, H, W)`` C-contiguous real (float32 by default); a spectrum is
-the real-to-complex half spectrum ``(K, Hp, Wp//2 + 1)`` of a field ``(K, Hp, Wp)``.
-Each primitive writes into ``out`` when given (no allocation in the solver loop) and
-returns the result.
+The contract (what each primitive computes, layouts, ``out=``) is ``base.Backend``'s; the docstrings
+here say only how NumPy computes it. Always the host path: the heavy primitives run cache-blocked on
+row blocks over a few threads (``host_tv``, ``blocks``), BLAS (``host_linalg``) and pocketfft.
 """
 from __future__ import annotations
 
 import os
+from contextlib import nullcontext
 
 import numpy as np
 import scipy.fft
@@ -15,7 +15,6 @@ import scipy.fft
 from ..errors import InputError
 from . import host_linalg
 from .blocks import map_blocks, scratch_buffer
-from .host_convolution import HostConvolution
 from .host_tv import haar_block, haar_limits, halo, subspace_tv_blocks, tv_norm_blocks
 
 VDOT_ROW = 8192   # products per float32 partial sum in vdot
@@ -45,6 +44,7 @@ class NumpyBackend:
     """Host reference backend (NumPy + SciPy's pocketfft)."""
 
     name = "numpy"
+    path = "host"
 
     def __init__(self, dtype="float32", workers: int | None = None):
         self.dtype = real_dtype(dtype)
@@ -55,7 +55,6 @@ class NumpyBackend:
 
     # ---- memory -------------------------------------------------------------------------
     def to_device(self, host: np.ndarray, complex_: bool = False) -> np.ndarray:
-        """A contiguous copy in the backend's dtype."""
         return np.array(host, dtype=self.cdtype if complex_ else self.dtype, order="C", copy=True)
 
     def to_host(self, array: np.ndarray) -> np.ndarray:
@@ -70,25 +69,25 @@ class NumpyBackend:
     def copy(self, x, out=None):
         return _result(out, x) if out is not None else x.copy()
 
+    def host_view(self, array: np.ndarray, mode: str):
+        """The array itself."""
+        return nullcontext(array)
+
+    def check_problem(self, sensor_shape, field_shape, n_bands: int) -> None:
+        """Host memory is not checked ahead (NumPy raises MemoryError where it runs out)."""
+
     # ---- FFT ----------------------------------------------------------------------------
     def fast_length(self, n: int) -> int:
         """The smallest length ≥ n that pocketfft transforms fast (5-smooth for real transforms)."""
         return scipy.fft.next_fast_len(int(n), real=True)
 
-    def convolution(self, transfer, filters, field_shape, skip_unseen: bool = True):
-        """A's filtered convolution: band chunks through pocketfft, pruned (see host_convolution)."""
-        return HostConvolution(transfer, filters, field_shape, self.dtype, self.workers, skip_unseen)
-
     def fft2(self, x, out=None):
-        """X = rfft2(x) over the last two axes: (..., Hp, Wp) real -> (..., Hp, Wp//2+1) complex."""
         return _result(out, scipy.fft.rfft2(x, workers=self.workers))
 
     def ifft2(self, spectrum, shape, out=None):
-        """x = irfft2(X, s=shape) over the last two axes: the inverse of fft2 for a real field of ``shape``."""
         return _result(out, scipy.fft.irfft2(spectrum, s=shape, workers=self.workers))
 
     def cmul(self, spectrum, transfer, conj: bool = False, out=None):
-        """X·Ĥ (or X·conj(Ĥ)), Ĥ (Hp, Wp//2+1) broadcast over bands."""
         factor = np.conj(transfer) if conj else transfer
         if out is None:
             return spectrum * factor
@@ -97,7 +96,6 @@ class NumpyBackend:
 
     # ---- geometry -----------------------------------------------------------------------
     def pad(self, x, field_shape, offset, out=None):
-        """Zero field of ``field_shape`` (last two axes) with x placed at ``offset`` = (oy, ox)."""
         if out is None:
             out = np.zeros(x.shape[:-2] + tuple(field_shape), x.dtype)
         else:
@@ -107,27 +105,22 @@ class NumpyBackend:
         return out
 
     def crop(self, x, shape, offset, out=None):
-        """The ``shape`` window of x's last two axes starting at ``offset`` = (oy, ox)."""
         oy, ox = offset
         return _result(out, x[..., oy:oy + shape[0], ox:ox + shape[1]].copy())
 
     def mask_sum(self, filters, field, offset, out=None):
-        """b = Σ_k F_k ⊙ crop(field_k): (K,H,W) filters, (K,Hp,Wp) field -> (H,W)."""
         oy, ox = offset
         window = field[:, oy:oy + filters.shape[-2], ox:ox + filters.shape[-1]]
         return np.einsum("khw,khw->hw", filters, window, out=out)
 
     def mask_spread(self, filters, r, field_shape, offset, out=None):
-        """v_k = pad(F_k ⊙ r): the adjoint of mask_sum; (H,W) -> (K,Hp,Wp)."""
         return self.pad(filters * r, field_shape, offset, out=out)
 
     # ---- vectors ------------------------------------------------------------------------
     def scale(self, a, x, out=None):
-        """a·x."""
         return np.multiply(x, a, out=out) if out is not None else a * x
 
     def axpy(self, a, x, y, out=None):
-        """a·x + y (out may alias x or y)."""
         if out is None:
             return a * x + y
         if out is y:
@@ -138,7 +131,7 @@ class NumpyBackend:
         return out
 
     def extrapolate(self, x_new, x_old, beta, out=None):
-        """FISTA momentum: x⁺ + β(x⁺ − x)  (out may alias x_old, not x_new); row blocks in parallel."""
+        """Row blocks in parallel."""
         if out is None:
             out = np.empty_like(x_new)
         new, old, target = (_as_rows(a) for a in (x_new, x_old, out))
@@ -153,7 +146,7 @@ class NumpyBackend:
         return out
 
     def vdot(self, x, y) -> float:
-        """⟨x, y⟩: rows of VDOT_ROW products summed by einsum in the array's dtype (SIMD partial sums),
+        """Rows of VDOT_ROW products summed by einsum in the array's dtype (SIMD partial sums),
         the row sums added in float64 — 5× faster than a float64 copy, ~1e-8 relative over 10⁸
         float32 terms (tests/stress)."""
         a, b = np.ravel(x), np.ravel(y)
@@ -162,26 +155,16 @@ class NumpyBackend:
         return float(rows.sum(dtype=np.float64) + np.dot(a[whole:].astype(np.float64), b[whole:].astype(np.float64)))
 
     def amax(self, x) -> float:
-        """max |x|."""
         return float(np.max(np.abs(x)))
 
     def nonneg(self, x, out=None):
-        """max(x, 0)."""
         return np.maximum(x, 0, out=out)
 
     def soft(self, x, t, out=None):
-        """Soft threshold sign(x)·max(|x| − t, 0)."""
         return _result(out, np.sign(x) * np.maximum(np.abs(x) - t, 0))
 
     def haar_tv(self, x, tau, weights, out=None, nonneg: bool = False):
-        """One parallel-proximal Haar step for weighted anisotropic TV (Kamilov 2016), then max(·, 0) if ``nonneg``.
-
-        For the D axes d with weight w_d > 0 (axes in cube order λ, y, x) and c_d = 2·D·τ·w_d:
-            out_i = x_i + 1/(2D) Σ_d [clip((x_{i+1} − x_i)/2, ±c_d) + clip((x_{i−1} − x_i)/2, ±c_d)]
-        which is the average over the 2D shifted 1-level Haar transforms of soft-thresholding
-        their detail coefficients by 2√2·D·τ·w_d; a missing neighbour (boundary) adds 0.
-        Computed on cache-sized row blocks in parallel (backends/host_tv.py).
-        """
+        """Computed on cache-sized row blocks in parallel (backends/host_tv.py)."""
         limits, scale = haar_limits(tau, weights)
         k, h, w = x.shape
         target = out if out is not None and not np.shares_memory(out, x) else np.empty_like(x)
@@ -198,11 +181,11 @@ class NumpyBackend:
         return _result(out, target) if target is not out else out
 
     def tv_norm(self, x, weights) -> float:
-        """Σ_d w_d Σ_i |x_{i+1} − x_i| along axis d (cube order λ, y, x), in float64, by row blocks."""
+        """By row blocks in parallel (backends/host_tv.py)."""
         return tv_norm_blocks(x, weights, self.workers)
 
     def fista_stats(self, x_new, x_old, y) -> tuple[float, float, float]:
-        """(‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩) in one pass over row blocks: FISTA's change and restart test."""
+        """One pass over row blocks in parallel."""
         new, old, ahead = (_as_rows(a) for a in (x_new, x_old, y))
 
         def block(y0, y1, scratch):
@@ -218,17 +201,14 @@ class NumpyBackend:
         return float(np.sum(np.abs(x), dtype=np.float64))
 
     def gram(self, x) -> np.ndarray:
-        """G = X Xᵀ (K×K, float64) of the bands×pixels unfolding X of x (float64 sums of BLAS chunks)."""
+        """float64 sums of BLAS chunks (backends/host_linalg.py)."""
         return host_linalg.gram(x)
 
     def bandmix(self, x, matrix, out=None):
-        """out_k = Σ_j M_kj x_j: a K×J matrix applied along the band axis of x (J bands)."""
         return _result(out, host_linalg.bandmix(x, matrix))
 
     def subspace_tv(self, c, basis, tau, weights, out=None):
-        """c⁺ = Bᵀ·max(0, haar_tv(B·c)): the TV prox and projection in band space for a cube in a spectral
-        subspace (c (r, H, W) coefficients, B (K, r) orthonormal columns), on row blocks: each block's
-        K-band expansion lives only in cache (backends/host_tv.py)."""
+        """On row blocks: each block's K-band expansion lives only in cache (backends/host_tv.py)."""
         target = out if out is not None and not np.shares_memory(out, c) else np.empty_like(c)
         subspace_tv_blocks(c, basis, tau, weights, target, self.workers)
         return _result(out, target) if target is not out else out

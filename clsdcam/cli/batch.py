@@ -3,21 +3,20 @@ from __future__ import annotations
 
 import sys
 
-from .errors import InputError
+from .options import add_preprocessing_options, add_solver_options, integer_at_least, positive_int
 
 
 def add_parser(subparsers):
-    from .cli import add_preprocessing_options, add_solver_options
-
     p = subparsers.add_parser("batch", help="reconstruct many frames (warm-started streams on Dask workers)")
     p.add_argument("frames", nargs="+", help="frame files, a folder of them, or one stack (.npy/.h5 (N,H,W), TIFF)")
     p.add_argument("--calibration", required=True)
     p.add_argument("-o", "--output", required=True, help="OUT.h5 (parts in OUT.h5.parts/)")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=1,
+    where.add_argument("--workers", type=integer_at_least(0), default=1,
                        help="worker processes of an embedded Dask LocalCluster (0: one in-process stream; default 1)")
     where.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
-    p.add_argument("--chunk", type=int, default=None, help="frames per task (default: missing frames / (2·workers), at most 64)")
+    p.add_argument("--chunk", type=positive_int, default=None,
+                   help="frames per task (default: missing frames / (2·workers), at most 64)")
     p.add_argument("--no-warm-start", action="store_true", help="start every frame from zero")
     p.add_argument("--overwrite", action="store_true", help="recompute everything (default: only the missing frames)")
     add_solver_options(p)
@@ -25,17 +24,12 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
-    from .batch import BatchSpec, run_batch
-    from .cli import preprocessing, settings
+    from ..batch import BatchSpec, run_batch
+    from .options import preprocessing_from, settings_from
 
-    for flag, value in (("--png", args.png), ("--full-field", args.full_field), ("--saturation", args.saturation)):
-        if value:
-            raise InputError(f"{flag} is not available in batch (per-frame pictures, fields or pixel masks)")
-    if args.workers < 0 or (args.chunk is not None and args.chunk < 1):
-        raise InputError("--workers must be ≥ 0 and --chunk ≥ 1")
-    spec = BatchSpec(frames=tuple(args.frames), calibration=args.calibration, preprocessing=preprocessing(args),
-                     settings=settings(args), backend=args.backend, device=args.device, fft=args.fft,
-                     warm_start=not args.no_warm_start)
+    spec = BatchSpec(frames=tuple(args.frames), calibration=args.calibration, preprocessing=preprocessing_from(args),
+                     settings=settings_from(args), backend=args.backend, device=args.device, fft=args.fft,
+                     path=args.path, warm_start=not args.no_warm_start)
     bars = []
     try:
         summary = run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,

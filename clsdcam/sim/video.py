@@ -1,8 +1,11 @@
 """Short simulated videos for batches: a scene drifting across the sensor, one noisy frame per step.
 
-Frame t shows the scene translated by t·(vy, vx) pixels (zero fill), through one camera
-(PSF, filters) with fresh noise per frame (seed + t). Written as ``frames.npy`` (N, H, W),
-``truth.h5`` (``cubes`` (N, K, H, W)) and ``calibration.h5``.
+Frame t shows the scene translated by t·(vy, vx) pixels (bilinear, zero fill),
+
+    v(t)(y, x) = v(0)(y − t·vy, x − t·vx),   b(t) = max(Σ_k F_k ⊙ crop(h ∗ v(t)_k) + noise_t, 0),
+
+through one camera (PSF, filters) with fresh noise per frame (seed + t). Written as
+``frames.npy`` (N, H, W), ``truth.h5`` (``cubes`` (N, K, H, W)) and ``calibration.h5``.
 """
 from __future__ import annotations
 
@@ -11,27 +14,32 @@ from pathlib import Path
 import numpy as np
 import scipy.ndimage as ndi
 
-from . import sim
-from .calibration import Calibration
-from .io import atomic_output
+from ..calibration import Calibration
+from ..io import atomic_output
+from .camera import add_noise, noiseless_measurement
+from .caustic import caustic_psf
+from .filters import filter_array
+from .scenes import make_scene
+from .sensor import DEFAULT_SHAPE
+from .spectra import band_wavelengths
 
 DRIFT = {"leds": (0.0, 1.0), "target": (0.5, 0.5)}  # px per frame (y, x): drifting LED grid, translating target
 
 
-def simulate_video(scene: str = "leds", n_frames: int = 8, shape=sim.DEFAULT_SHAPE, n_bands: int = 64,
+def simulate_video(scene: str = "leds", n_frames: int = 8, shape=DEFAULT_SHAPE, n_bands: int = 64,
                    seed: int = 0, noise_var: float = 1e-5, photons: float | None = 20000.0):
     """(calibration, frames (N, H, W) float32, truth (N, K, H, W) float32)."""
-    wavelengths = sim.band_wavelengths(n_bands)
-    psf = sim.caustic_psf(shape, seed)
-    filters = sim.filter_array(shape, wavelengths, seed)
-    first = sim.make_scene(scene, shape, wavelengths, seed)
+    wavelengths = band_wavelengths(n_bands)
+    psf = caustic_psf(shape, seed)
+    filters = filter_array(shape, wavelengths, seed)
+    first = make_scene(scene, shape, wavelengths, seed)
     vy, vx = DRIFT.get(scene, (0.0, 1.0))
     truth = np.stack([ndi.shift(first, (0, t * vy, t * vx), order=1) for t in range(n_frames)]).astype(np.float32)
     frames = np.stack([
-        np.maximum(sim.add_noise(sim.noiseless_measurement(psf, filters, cube), np.random.default_rng(seed + t),
-                                 noise_var, photons), 0)
+        np.maximum(add_noise(noiseless_measurement(psf, filters, cube), np.random.default_rng(seed + t),
+                             noise_var, photons), 0)
         for t, cube in enumerate(truth)]).astype(np.float32)
-    return Calibration(psf, filters, wavelengths, source=f"clsdcam.video(scene={scene!r}, seed={seed})"), frames, truth
+    return Calibration(psf, filters, wavelengths, source=f"clsdcam.sim.video(scene={scene!r}, seed={seed})"), frames, truth
 
 
 def write_video(outdir, calibration, frames, truth) -> dict[str, Path]:

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .io import IMAGE_SUFFIXES, as_real_array, load_measurement, require_finite
+from ..errors import InputError
+from ..io import IMAGE_SUFFIXES, as_real_array, load_measurement, require_finite
 
 FRAME_SUFFIXES = IMAGE_SUFFIXES + (".npy", ".h5", ".hdf5")
 STACK_KEYS = ("frames", "measurement", "measurements")

@@ -1,18 +1,14 @@
-"""``clsdcam analyze {resolution,condition,designs,spectral,twopoint,all} OUTDIR``: the paper's
-analyses, each writing ``NAME.json`` and ``NAME.png`` into OUTDIR; ``all`` also writes
-``report.html`` and ``summary.md`` and prints the summary table next to the paper's values.
+"""The paper's analyses as named runs: each writes ``NAME.json`` and ``NAME.png`` into a folder; a summary
+table next to the paper's values and ``report.html`` gather them (``clsdcam analyze``).
 
-Sizes (options of every sub-choice, recorded in each JSON): the PSF and condition-number
-analyses use ``--size`` (default the prototype's 320×448); the reconstructions use
-``--recon-size`` (default 64×96), ``--bands`` (64) and ``--iters`` (200), because a full
-320×448×64 reconstruction costs seconds per iteration.
+Sizes (recorded in each JSON): the PSF and condition-number analyses use ``size`` (default the
+prototype's 320×448); the reconstructions use ``recon_size`` (default 64×96), ``bands`` (64) and
+``iters`` (200), because a full 320×448×64 reconstruction costs seconds per iteration.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -24,76 +20,6 @@ SEPARATIONS = (1, 2, 3, 4, 5, 6, 7, 8, 10, 12, 14, 16, 20, 24, 32)
 GROUP_SIZES = (2, 4, 9, 16)
 REAL_PSFS = {"Spectral DiffuserScope (measured)": "psf/spectraldiffuserscope_psf.npy",
              "DiffuserCam tutorial (measured)": "psf/diffusercam_tutorial_psf_sample.tif"}
-ANALYSES = ("resolution", "condition", "designs", "spectral", "twopoint")
-HELP = {"resolution": "PSF autocorrelation half-width at 70 % (simulated and measured PSFs)",
-        "condition": "local condition numbers of groups of points: diffuser, low-NA and high-NA lenses",
-        "designs": "the resolution target through the three designs: PSNR, spectral angle, pictures",
-        "spectral": "peak-wavelength error of narrow-band point sources over 386–898 nm",
-        "twopoint": "two-point resolution at 618, 522, 466 nm by the Rayleigh criterion",
-        "all": "every analysis, a summary table and report.html"}
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """'HxW' (or 'H×W') -> (H, W), both ≥ 8."""
-    try:
-        h, w = (int(v) for v in text.replace("×", "x").lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected HxW, e.g. 64x96") from None
-    if min(h, w) < 8:
-        raise argparse.ArgumentTypeError(f"{text!r}: both sides must be ≥ 8")
-    return h, w
-
-
-def _at_least(low: int):
-    """An argparse type: an integer ≥ ``low``."""
-    def parse(text: str) -> int:
-        value = int(text)
-        if value < low:
-            raise argparse.ArgumentTypeError(f"{text}: must be ≥ {low}")
-        return value
-    return parse
-
-
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """The ``analyze`` subcommand with one sub-choice per analysis (dest ``what``), each taking OUTDIR
-    and the size options (HxW, parsed by :func:`parse_size`)."""
-    options = argparse.ArgumentParser(add_help=False)
-    options.add_argument("outdir", help="folder for the JSON, PNG (and report) files")
-    options.add_argument("--size", type=parse_size, default=sim.DEFAULT_SHAPE, metavar="HxW",
-                         help="sensor of the PSF and condition-number analyses (default 320x448)")
-    options.add_argument("--recon-size", type=parse_size, default=(64, 96), metavar="HxW",
-                         help="sensor of the reconstruction analyses (default 64x96)")
-    options.add_argument("--bands", type=_at_least(2), default=64,
-                         help="bands of the filter array and the reconstructions (default 64)")
-    options.add_argument("--iters", type=_at_least(1), default=200, help="iterations per reconstruction (default 200)")
-    options.add_argument("--trials", type=_at_least(1), default=5, help="random placements per condition number (default 5)")
-    options.add_argument("--seed", type=int, default=0)
-    parser = subparsers.add_parser("analyze", help="the paper's resolution analyses (JSON + PNG per analysis)")
-    which = parser.add_subparsers(dest="what", required=True, metavar="{" + ",".join(ANALYSES + ("all",)) + "}")
-    for name in ANALYSES + ("all",):
-        which.add_parser(name, parents=[options], help=HELP[name], description=HELP[name])
-    return parser
-
-
-def run(args) -> int:
-    """Run the chosen analyses; print where each went; for ``all`` the summary table and the report."""
-    out = Path(args.outdir)
-    out.mkdir(parents=True, exist_ok=True)
-    names = ANALYSES if args.what == "all" else (args.what,)
-    results = {}
-    for name in names:
-        start = time.perf_counter()
-        results[name] = RUNNERS[name](args, out)
-        results[name]["seconds"] = round(time.perf_counter() - start, 1)
-        write_json(out / f"{name}.json", results[name])
-        print(f"{name}: {out / (name + '.json')}, {out / (name + '.png')} ({results[name]['seconds']:.0f} s)")
-    if args.what == "all":
-        table = summary_table(results)
-        print(table)
-        with atomic_output(out / "summary.md") as tmp:
-            tmp.write_text(table + "\n", encoding="utf-8")
-        write_report(out, table, results)
-    return 0
 
 
 # ---- the analyses ------------------------------------------------------------------------------
@@ -160,6 +86,7 @@ def run_twopoint(args, out: Path) -> dict:
 
 RUNNERS = {"resolution": run_resolution, "condition": run_condition, "designs": run_designs,
            "spectral": run_spectral, "twopoint": run_twopoint}
+ANALYSES = tuple(RUNNERS)
 
 
 # ---- summary -----------------------------------------------------------------------------------

@@ -1,0 +1,183 @@
+"""The backend contract: the primitives every backend provides, documented once, and the rule for which
+code runs them.
+
+A backend owns arrays in one memory (NumPy's, or an OpenCL device's) and offers the operations below on
+them, all with the same names, signatures and ``out=`` semantics: each writes into ``out`` when given (no
+allocation in the solver's loop) and returns the array holding the result. Layouts: a cube is ``(K, H, W)``
+C-contiguous real (float32, or float64 on request); a spectrum is the real-to-complex half spectrum
+``(K, Hp, Wp//2 + 1)`` of a field ``(K, Hp, Wp)``. Scalars (``vdot``, norms) come back as Python floats,
+small matrices (``gram``) as float64 NumPy arrays on the host. The model, the priors and the loop are
+written once over these primitives; a primitive's NumPy form (``numpy.py``, the reference), its kernel in
+``kernels/``, its parity test and its benchmark row share one name.
+
+Paths: which code runs the heavy primitives.
+
+==========  ================================================  =============================================
+path        what runs                                         where
+==========  ================================================  =============================================
+``host``    host code on host arrays: A and Aᵀ as the         NumPy; OpenCL on CPU devices, on zero-copy
+            band-chunked, pruned pocketfft pipeline              mapped buffers (:meth:`Backend.host_view`)
+            (``host_convolution``), ``HOST_CODE`` primitives
+            by BLAS / cache-blocked NumPy (``host_linalg``,
+            ``host_tv``); the rest as the backend's own
+            primitives (OpenCL kernels on OpenCL)
+``device``  every primitive as an OpenCL kernel, FFTs on the  OpenCL on any device (what GPUs run); A and
+            device (VkFFT when installed, else reikna)        Aᵀ as fft2 → cmul → ifft2 → mask_sum
+==========  ================================================  =============================================
+
+``auto`` (the default) is ``host`` on CPU devices and NumPy, ``device`` elsewhere (:func:`resolve_path`).
+The FFT engine follows the path: ``host`` on the host path; on the device path ``vkfft`` when pyvkfft is
+importable, else ``reikna`` (``--fft`` picks one of the path's engines).
+"""
+from __future__ import annotations
+
+from contextlib import AbstractContextManager
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from ..errors import InputError
+
+PATHS = ("auto", "host", "device")
+HOST_CODE = ("tv_norm", "gram", "bandmix", "subspace_tv")   # host code on the host path, kernels on the device path
+HOST_ENGINES = ("host",)
+DEVICE_ENGINES = ("reikna", "vkfft")
+
+
+def resolve_path(requested: str, cpu_device: bool) -> str:
+    """``host`` or ``device`` for a requested path on a device (``cpu_device``: its memory is the host's)."""
+    if requested not in PATHS:
+        raise InputError(f"--path {requested!r}: expected one of {', '.join(PATHS)}")
+    if requested == "auto":
+        return "host" if cpu_device else "device"
+    if requested == "host" and not cpu_device:
+        raise InputError("--path host runs host code on mapped buffers: CPU devices only (use --path device, or auto)")
+    return requested
+
+
+def check_engine(path: str, engine: str) -> None:
+    """InputError when ``engine`` is not one of ``path``'s FFT engines (``auto`` always is)."""
+    engines = HOST_ENGINES if path == "host" else DEVICE_ENGINES
+    if engine != "auto" and engine not in engines:
+        raise InputError(f"--fft {engine!r} is not an engine of the {path} path (its engines: {', '.join(engines)}; "
+                         f"{'--path device runs reikna or vkfft' if path == 'host' else '--path host runs host'})")
+
+
+@runtime_checkable
+class Backend(Protocol):
+    """The primitives of one backend (NumPy: ``numpy.NumpyBackend``; OpenCL: ``opencl.OpenCLBackend``)."""
+
+    name: str            # "numpy" or "opencl"
+    dtype: np.dtype      # real dtype of cubes: float32 or float64
+    cdtype: np.dtype     # its complex dtype
+    device_name: str     # as recorded in output files
+    fft_engine: str      # the FFT engine's name
+    path: str            # "host" or "device" (see the module docstring)
+    workers: int         # host threads for host code
+
+    # ---- memory ---------------------------------------------------------------------------------------
+    def to_device(self, host: np.ndarray, complex_: bool = False) -> Any:
+        """A contiguous copy of a host array in the backend's (complex) dtype."""
+
+    def to_host(self, array) -> np.ndarray:
+        """A NumPy copy of a backend array."""
+
+    def empty(self, shape, complex_: bool = False) -> Any:
+        """An uninitialised array: its contents are garbage on a GPU, whatever they are on a CPU."""
+
+    def zeros(self, shape, complex_: bool = False) -> Any:
+        """An array of zeros."""
+
+    def copy(self, x, out=None) -> Any:
+        """A copy of x (into ``out``)."""
+
+    def host_view(self, array, mode: str) -> AbstractContextManager[np.ndarray]:
+        """The array as a NumPy array for the duration of a ``with`` block, without copying (host path only):
+        ``mode`` "r" (read), "w" (write: its old contents may be lost) or "rw". Work queued before is done
+        when the block starts; what the block writes is seen by work queued after it."""
+
+    def check_problem(self, sensor_shape, field_shape, n_bands: int) -> None:
+        """InputError (needed against available memory, and what to do) when one solve cannot fit."""
+
+    # ---- FFT ------------------------------------------------------------------------------------------
+    def fast_length(self, n: int) -> int:
+        """The smallest length ≥ n the FFT engine transforms fast."""
+
+    def fft2(self, x, out=None) -> Any:
+        """X = rfft2(x) over the last two axes: (..., Hp, Wp) real → (..., Hp, Wp//2+1) complex."""
+
+    def ifft2(self, spectrum, shape, out=None) -> Any:
+        """x = irfft2(X, s=shape) over the last two axes (1/N normalised): the inverse of fft2."""
+
+    def cmul(self, spectrum, transfer, conj: bool = False, out=None) -> Any:
+        """X·Ĥ (or X·conj(Ĥ)), Ĥ (Hp, Wp//2+1) broadcast over bands (out may alias X)."""
+
+    # ---- geometry -------------------------------------------------------------------------------------
+    def pad(self, x, field_shape, offset, out=None) -> Any:
+        """Zero field of ``field_shape`` (last two axes) with x placed at ``offset`` = (oy, ox)."""
+
+    def crop(self, x, shape, offset, out=None) -> Any:
+        """The ``shape`` window of x's last two axes starting at ``offset`` = (oy, ox)."""
+
+    def mask_sum(self, filters, field, offset, out=None) -> Any:
+        """b = Σ_k F_k ⊙ crop(field_k): (K,H,W) filters, (K,Hp,Wp) field → (H,W)."""
+
+    def mask_spread(self, filters, r, field_shape, offset, out=None) -> Any:
+        """v_k = pad(F_k ⊙ r), the adjoint of mask_sum: (H,W) → (K,Hp,Wp)."""
+
+    # ---- vectors --------------------------------------------------------------------------------------
+    def scale(self, a, x, out=None) -> Any:
+        """a·x."""
+
+    def axpy(self, a, x, y, out=None) -> Any:
+        """a·x + y (out may alias x or y)."""
+
+    def extrapolate(self, x_new, x_old, beta, out=None) -> Any:
+        """FISTA's momentum step x⁺ + β(x⁺ − x) (out may alias x_old, not x_new)."""
+
+    def vdot(self, x, y) -> float:
+        """⟨x, y⟩, summed with partial sums in float64 (or compensated float32)."""
+
+    def amax(self, x) -> float:
+        """max |x|."""
+
+    def nonneg(self, x, out=None) -> Any:
+        """max(x, 0)."""
+
+    def soft(self, x, t, out=None) -> Any:
+        """Soft threshold sign(x)·max(|x| − t, 0)."""
+
+    def l1_norm(self, x) -> float:
+        """Σ |x|."""
+
+    def fista_stats(self, x_new, x_old, y) -> tuple[float, float, float]:
+        """(‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩) in one pass: FISTA's relative change and restart test."""
+
+    # ---- priors ---------------------------------------------------------------------------------------
+    def haar_tv(self, x, tau, weights, out=None, nonneg: bool = False) -> Any:
+        """One parallel-proximal Haar step for weighted anisotropic TV (Kamilov 2016), then max(·, 0) if
+        ``nonneg``. For the D axes d with weight w_d > 0 (cube axes λ, y, x) and c_d = 2·D·τ·w_d:
+
+            out_i = x_i + 1/(2D) Σ_d [clip((x_{i+1} − x_i)/2, ±c_d) + clip((x_{i−1} − x_i)/2, ±c_d)]
+
+        the average over the 2D shifted one-level Haar transforms of soft-thresholding their detail
+        coefficients by 2√2·D·τ·w_d; a missing neighbour (boundary) adds 0. out may alias x."""
+
+    def tv_norm(self, x, weights) -> float:
+        """Σ_d w_d Σ_i |x_{i+e_d} − x_i| along each axis d (cube order λ, y, x), in float64."""
+
+    def gram(self, x) -> np.ndarray:
+        """G = X Xᵀ (K×K, float64, on the host) of the bands×pixels unfolding X of x."""
+
+    def bandmix(self, x, matrix, out=None) -> Any:
+        """out_k = Σ_j M_kj x_j: a K×J host matrix applied along the band axis of x (J bands); out may alias x."""
+
+    def subspace_tv(self, c, basis, tau, weights, out=None) -> Any:
+        """c⁺ = Bᵀ·max(0, haar_tv(B·c)): the TV prox and non-negativity in band space for a cube of r
+        coefficients c (r, H, W) in the span of B (K × r, orthonormal columns); out may alias c."""
+
+
+def protocol_members() -> tuple[str, ...]:
+    """The names of the contract's methods (for tests and ``clsdcam check``)."""
+    return tuple(name for name, value in vars(Backend).items()
+                 if callable(value) and not name.startswith("_"))

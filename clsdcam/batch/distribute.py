@@ -1,0 +1,154 @@
+"""The whole batch: the missing frames as chunks, in one process or on Dask distributed workers.
+
+Distribution. The frames still missing are cut into contiguous chunks (a chunk is one Dask
+task, so warm starts hold inside it). The worker writes its chunk into a temporary file and
+renames it to its part (:mod:`clsdcam.batch.parts`): a part is whole or absent. A task that
+Dask re-runs after its worker died finds the part already there when the dead worker had
+finished it, and keeps it: no frame is lost or written twice. Without Dask (``workers=0``)
+the chunks run as one stream in this process, warm starts carried across them.
+
+Progress. Each finished frame is reported once (an event per frame from the workers; a
+re-run chunk repeats its events and they are counted once).
+"""
+from __future__ import annotations
+
+import shutil
+import threading
+import time
+import uuid
+from dataclasses import replace
+from pathlib import Path
+
+from ..errors import InputError
+from .frames import FrameSource
+from .parts import assemble, chunks, claim, finished_parts, missing_frames, part_path, parts_dir
+from .spec import BatchSpec, BatchSummary
+from .stream import failure_text, run_stream, solve_chunk
+
+
+def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None = None, chunk: int | None = None,
+              overwrite: bool = False, progress=None, on_plan=None) -> BatchSummary:
+    """Reconstruct every frame not yet in ``output``'s parts, then (re)build ``output``.
+
+    ``workers`` = 0 (and no scheduler): one in-process stream (warm starts carried across its
+    chunks); otherwise Dask distributed, an embedded LocalCluster of ``workers`` processes or
+    the cluster at ``scheduler``. ``chunk`` defaults to ⌈missing / (2·worker threads)⌉, at
+    most MAX_CHUNK. ``on_plan(n_frames, n_missing)`` is called once the missing frames are
+    known, ``progress(k)`` as k more frames are done.
+    """
+    output = Path(output).resolve()
+    spec = replace(spec, frames=tuple(str(Path(p).resolve()) for p in spec.frames),
+                   calibration=str(Path(spec.calibration).resolve()))  # workers may run elsewhere
+    n = len(FrameSource(spec.frames))
+    parts = parts_dir(output)
+    if overwrite:
+        shutil.rmtree(parts, ignore_errors=True)
+        output.unlink(missing_ok=True)
+    claim(parts, spec, n)
+    missing = missing_frames(parts, n)
+    if on_plan is not None:
+        on_plan(n, len(missing))
+    start = time.perf_counter()
+    lost = _compute(spec, parts, missing, (workers, scheduler, chunk), _Progress(progress))
+    summary = assemble(output, n, lost)
+    summary.computed_frames, summary.seconds = len(missing), time.perf_counter() - start
+    return summary
+
+
+def _compute(spec: BatchSpec, parts: Path, missing: list[int], how, progress) -> dict[int, str]:
+    """Compute the missing frames' parts; {frame: reason} for frames lost with their whole chunk.
+    On any exception, a parts folder with no part yet is removed (a failed start leaves no trace)."""
+    workers, scheduler, chunk = how
+    try:
+        if missing and workers == 0 and scheduler is None:
+            _run_serial(spec, parts, chunks(missing, chunk, 1), progress)
+        elif missing:
+            with _client(workers, scheduler) as client:
+                slots = sum(client.nthreads().values()) or max(workers, 1)
+                return _run_dask(client, spec, parts, chunks(missing, chunk, slots), progress)
+    except BaseException:
+        if not finished_parts(parts):  # nothing computed (e.g. no scheduler): leave no trace
+            shutil.rmtree(parts, ignore_errors=True)
+        raise
+    return {}
+
+
+class _Progress:
+    """Counts each frame once (events can repeat when Dask re-runs a chunk) and reports it."""
+
+    def __init__(self, callback):
+        self.callback, self.seen, self.lock = callback, set(), threading.Lock()
+
+    def __call__(self, indices):
+        with self.lock:
+            new = set(indices) - self.seen
+            self.seen |= new
+        if new and self.callback is not None:
+            self.callback(len(new))
+
+
+def _run_serial(spec, parts, bounds, progress):
+    """The chunks in this process, one after another; a chunk that follows on its predecessor continues its stream."""
+    past, last = (None, None), None
+    for s, e in bounds:
+        _, past = run_stream(spec, s, e, part_path(parts, s, e), lambda i: progress([i]),
+                             past if s == last else (None, None))
+        last = e
+
+
+def _dask_chunk(spec, start, stop, part, topic):
+    """solve_chunk on a Dask worker, announcing each finished frame on the event ``topic``."""
+    from distributed import get_worker
+
+    worker = get_worker()
+    return solve_chunk(spec, start, stop, part, lambda i: worker.log_event(topic, i))
+
+
+def _run_dask(client, spec, parts, bounds, progress) -> dict[int, str]:
+    """Run the chunks as tasks; {frame: reason} for the frames of chunks that failed as a whole
+    (e.g. their worker died more often than Dask's allowed-failures): a re-run retries them."""
+    from distributed import as_completed
+
+    topic = f"clsdcam-frames-{uuid.uuid4().hex}"
+    client.subscribe_topic(topic, lambda event: progress([event[1]]))
+    futures = {client.submit(_dask_chunk, spec, s, e, str(part_path(parts, s, e)), topic, pure=False,
+                             key=f"clsdcam-chunk-{s}-{e}-{uuid.uuid4().hex}"): (s, e) for s, e in bounds}
+    lost = {}
+    try:
+        for future in as_completed(futures, loop=client.loop):
+            if future.status == "finished":
+                progress(r["index"] for r in future.result())
+            else:
+                lost.update(dict.fromkeys(range(*futures[future]), f"chunk failed: {failure_text(future.exception())}"))
+    finally:
+        client.unsubscribe_topic(topic)
+        client.cancel(list(futures))
+    return lost
+
+
+class _client:
+    """A Dask client on an embedded LocalCluster (``workers`` processes) or on ``scheduler``."""
+
+    def __init__(self, workers: int, scheduler: str | None):
+        self.workers, self.scheduler, self.cluster = workers, scheduler, None
+
+    def __enter__(self):
+        import logging
+
+        from distributed import Client, LocalCluster
+
+        if self.scheduler:
+            try:
+                self.client = Client(self.scheduler, timeout=30)
+            except OSError as exc:
+                raise InputError(f"--scheduler {self.scheduler}: cannot connect ({exc})") from None
+        else:
+            self.cluster = LocalCluster(n_workers=max(self.workers, 1), threads_per_worker=1, processes=True,
+                                        dashboard_address=":0", silence_logs=logging.ERROR)
+            self.client = Client(self.cluster)
+        return self.client
+
+    def __exit__(self, *exc):
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()

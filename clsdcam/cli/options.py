@@ -1,0 +1,188 @@
+"""The command line's parser: argument types, the option groups commands share, and ``build_parser``.
+
+Building the parser imports only this package's command modules, ``clsdcam.settings`` (with the prior
+table that generates one ``--flag`` per prior) and ``clsdcam.prototype``: every heavy import (SciPy, h5py,
+the solver, the simulator) waits inside a command's ``run``. A usage error is an InputError: one line,
+exit 2.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+
+from .. import __version__
+from ..errors import InputError
+
+COMMANDS = ("reconstruct", "batch", "simulate", "demo", "analyze", "devices")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse that reports a usage error as an InputError (one line, exit 2)."""
+
+    def error(self, message):
+        raise InputError(message)
+
+
+# ---- argument types (argparse names the option in its one-line error) -----------------------------------
+def number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def integer_at_least(minimum: int):
+    """An argparse type: an integer ≥ ``minimum``."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{value} must be ≥ {minimum}")
+        return value
+
+    return parse
+
+
+positive_int = integer_at_least(1)
+non_negative_int = integer_at_least(0)
+
+
+def weights(text: str) -> tuple[float, float, float]:
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected WX,WY,WL")
+    return tuple(number(p) for p in parts)
+
+
+def iterations(text: str) -> tuple[int, ...]:
+    return tuple(positive_int(p) for p in text.split(","))
+
+
+def size(minimum: int = 1):
+    """An argparse type: 'HxW' (or 'H×W') -> (H, W), both ≥ ``minimum``."""
+    def parse(text: str) -> tuple[int, int]:
+        parts = text.replace("×", "x").lower().split("x")
+        if len(parts) != 2:
+            raise argparse.ArgumentTypeError(f"{text!r}: expected HxW, e.g. 320x448")
+        return tuple(integer_at_least(minimum)(p) for p in parts)
+
+    return parse
+
+
+# ---- option groups --------------------------------------------------------------------------------------
+def add_backend_options(p: argparse.ArgumentParser):
+    p.add_argument("--backend", default="numpy", choices=("numpy", "opencl"), help="numpy (reference) or opencl")
+    p.add_argument("--device", default=None,
+                   help="OpenCL device: substring of platform or device name (default: PYOPENCL_CTX, else a GPU, else a CPU)")
+    p.add_argument("--path", default="auto", choices=("auto", "host", "device"),
+                   help="which code runs the heavy primitives: host code on mapped buffers (CPU devices) or kernels "
+                        "(default auto: host on CPU devices, device elsewhere)")
+    p.add_argument("--fft", default="auto", choices=("auto", "host", "reikna", "vkfft"),
+                   help="FFT engine (default auto: host pocketfft on the host path, vkfft if installed else reikna on "
+                        "the device path)")
+    p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
+
+
+def add_solver_options(p: argparse.ArgumentParser):
+    """The solver's options: iterations, one weight per prior of the table, stopping rules, skips, backend."""
+    from ..priors import PRIORS
+    from ..settings import DEFAULT_ITERS
+
+    p.add_argument("--iters", type=positive_int, default=DEFAULT_ITERS, help=f"FISTA iterations (default {DEFAULT_ITERS})")
+    for row in PRIORS:
+        p.add_argument(row.flag, dest=row.name, type=number, default=row.default, metavar="W",
+                       help=f"{row.help} (default {row.default:g})")
+    p.add_argument("--tv-weights", type=weights, default=(1.0, 1.0, 1.0), metavar="WX,WY,WL",
+                   help="TV weights along x, y and λ (default 1,1,1)")
+    p.add_argument("--tol", type=number, default=0.0, help="stop when ‖Δx‖/‖x‖ < TOL (default: off)")
+    p.add_argument("--plateau", type=number, default=0.0,
+                   help="stop when the objective fell by less than this (relative) over its last check (default: off)")
+    p.add_argument("--rank", type=non_negative_int, default=0, metavar="R",
+                   help="solve for R spectral basis vectors instead of the bands (default 0: chosen automatically)")
+    p.add_argument("--no-skip", action="store_true",
+                   help="the full solver: the paper's 2H×2W field, every band, no spectral subspace")
+    add_backend_options(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--save-on-interrupt", action="store_true",
+                   help="on Ctrl-C, write the best cube so far (default: write nothing)")
+
+
+def add_preprocessing_options(p: argparse.ArgumentParser):
+    p.add_argument("--crop", default=None, metavar="Y0:Y1,X0:X1", help="crop calibration and measurement")
+    p.add_argument("--reference-preprocess", action="store_true",
+                   help="the authors' preprocessing: crop 100:420,80:540, zero the defect block, drop band 65")
+    p.add_argument("--zero-defect", action="store_true", help="zero the 4×4 defect block at the mask's brightest pixel")
+    p.add_argument("--drop-last-band", action="store_true", help="drop the calibration's last band")
+    p.add_argument("--no-normalize-psf", action="store_true", help="keep the PSF as given (default: unit L2 norm)")
+    p.add_argument("--no-normalize-filters", action="store_true", help="keep the filters as given (default: max 1)")
+    p.add_argument("--dead-pixels", default=None, metavar="FILE",
+                   help="image/.npy mask (non-zero = dead, same size as the measurement) of pixels to exclude")
+
+
+def add_simulation_options(p: argparse.ArgumentParser):
+    from ..prototype import N_BANDS, SENSOR_SHAPE
+
+    p.add_argument("--scene", default="target", help="target, leds, piecewise, points or realcube (default target)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--noise", type=number, default=None, help="Gaussian noise variance relative to max(b)²")
+    p.add_argument("--size", type=size(), default=SENSOR_SHAPE, metavar="HxW",
+                   help=f"sensor size (default {SENSOR_SHAPE[0]}x{SENSOR_SHAPE[1]})")
+    p.add_argument("--bands", type=positive_int, default=N_BANDS, help=f"number of bands (default {N_BANDS})")
+
+
+# ---- the parser -----------------------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    """``clsdcam`` with one sub-command per module of this package (each module's ``add_parser``)."""
+    parser = Parser(prog="clsdcam", description="Spectral DiffuserCam hyperspectral reconstruction")
+    parser.add_argument("--version", action="version", version=f"clsdcam {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser,
+                                title="commands (clsdcam COMMAND --help for each)")
+    for name in COMMANDS:
+        command_module(name).add_parser(sub)
+    return parser
+
+
+def command_module(name: str):
+    """``clsdcam.cli.<name>``: its ``add_parser(subparsers)`` and ``run(args) -> exit code``."""
+    return importlib.import_module(f"{__package__}.{name}")
+
+
+# ---- options -> objects ---------------------------------------------------------------------------------
+def settings_from(args):
+    """Solver settings from the command-line options (every prior's weight by its table name)."""
+    from ..priors import PRIORS
+    from ..settings import Settings
+
+    return Settings(iters=args.iters, tv_weights=args.tv_weights, tol=args.tol, plateau=args.plateau, rank=args.rank,
+                    skip=not args.no_skip, dtype=args.dtype, full_field=getattr(args, "full_field", False),
+                    **{row.name: getattr(args, row.name) for row in PRIORS})
+
+
+def preprocessing_from(args):
+    """The preprocessing steps the options ask for (``--reference-preprocess`` as the base)."""
+    from ..calibration import Preprocessing, parse_crop
+
+    base = Preprocessing.reference() if args.reference_preprocess else Preprocessing()
+    crop = parse_crop(args.crop) if args.crop else base.crop
+    return Preprocessing(
+        crop=crop,
+        normalize_psf=not args.no_normalize_psf,
+        normalize_filters=not args.no_normalize_filters,
+        zero_defect=args.zero_defect or base.zero_defect,
+        drop_last_band=args.drop_last_band or base.drop_last_band,
+        saturation=getattr(args, "saturation", None),
+        dead_pixels=_dead_pixels(args.dead_pixels, crop),
+    )
+
+
+def _dead_pixels(path, crop):
+    """The --dead-pixels mask, cropped like the measurement."""
+    if path is None:
+        return None
+    from ..calibration import PixelMask
+    from ..io import load_measurement
+
+    mask = load_measurement(path)
+    return PixelMask.of(mask if crop is None else mask[crop[0]:crop[1], crop[2]:crop[3]])

@@ -1,0 +1,38 @@
+"""``clsdcam reconstruct MEAS --calibration CAL -o OUT.h5``: one measurement to a cube."""
+from __future__ import annotations
+
+from ..errors import InputError, shape_text
+from .options import add_preprocessing_options, add_solver_options, number, preprocessing_from
+from .solve import print_accuracy, solve, write
+
+
+def add_parser(subparsers):
+    p = subparsers.add_parser("reconstruct", help="reconstruct a cube from one measurement")
+    p.add_argument("measurement", help="PNG/TIFF (8/16-bit), .npy or .h5 (dataset 'measurement')")
+    p.add_argument("--calibration", required=True, help="calibration.mat (psf, mask, wavs) or our .h5")
+    p.add_argument("-o", "--output", required=True, help="output cube, HDF5")
+    p.add_argument("--truth", default=None, help="true cube (.h5 with 'cube') to print PSNR and spectral angle")
+    p.add_argument("--png", default=None, metavar="PREFIX", help="write pictures PREFIX_*.png")
+    p.add_argument("--full-field", action="store_true", help="also write the whole padded field")
+    add_solver_options(p)
+    add_preprocessing_options(p)
+    p.add_argument("--saturation", type=number, default=None, metavar="LEVEL",
+                   help="exclude pixels whose raw value is ≥ LEVEL (saturated) from the data term")
+
+
+def run(args) -> int:
+    from ..calibration import Calibration, preprocess
+    from ..io import load_measurement, read_cube
+
+    calibration = Calibration.load(args.calibration)
+    measurement = load_measurement(args.measurement)
+    calibration, measurement = preprocess(calibration, measurement, preprocessing_from(args))
+    truth = read_cube(args.truth)["cube"] if args.truth else None
+    expected = (calibration.n_bands,) + measurement.shape
+    if truth is not None and truth.shape != expected:
+        raise InputError(f"--truth {args.truth}: cube {shape_text(truth.shape)} does not match {shape_text(expected)}")
+    result = solve(args, calibration, measurement)
+    code = write(args, result, truth)
+    if truth is not None and code == 0:
+        print_accuracy(result.cube, truth)
+    return code

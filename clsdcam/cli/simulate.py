@@ -1,0 +1,44 @@
+"""``clsdcam simulate OUTDIR``: a simulated camera, scene and measurement (or a drifting video)."""
+from __future__ import annotations
+
+from ..errors import InputError, shape_text
+from .options import add_simulation_options, positive_int
+
+
+def add_parser(subparsers):
+    p = subparsers.add_parser("simulate", help="simulate a camera, a scene and its measurement")
+    p.add_argument("outdir")
+    p.add_argument("--frames", type=positive_int, default=None,
+                   help="write a video of N frames of the scene drifting (frames.npy, truth.h5)")
+    add_simulation_options(p)
+
+
+def run(args) -> int:
+    from ..sim import simulate, write_simulation
+
+    if args.frames:
+        return _simulate_video(args)
+    sim = simulate(**simulation_kwargs(args))
+    paths = write_simulation(args.outdir, sim)
+    print(f"simulated scene {sim.scene!r} ({shape_text(sim.truth.shape)}): " +
+          ", ".join(str(p) for p in paths.values()))
+    return 0
+
+
+def _simulate_video(args) -> int:
+    from ..sim import simulate_video, write_video
+
+    calibration, frames, truth = simulate_video(args.scene, args.frames, args.size, args.bands, args.seed)
+    paths = write_video(args.outdir, calibration, frames, truth)
+    print(f"simulated {args.frames} frames of {args.scene!r}: " + ", ".join(str(p) for p in paths.values()))
+    return 0
+
+
+def simulation_kwargs(args) -> dict:
+    """simulate()'s arguments from the simulation options."""
+    kwargs = {"scene": args.scene, "shape": args.size, "n_bands": args.bands, "seed": args.seed}
+    if args.noise is not None:
+        if args.noise < 0:
+            raise InputError(f"--noise {args.noise}: must be ≥ 0")
+        kwargs["noise_var"] = args.noise
+    return kwargs

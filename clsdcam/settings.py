@@ -1,0 +1,67 @@
+"""Solver settings: the loop's and the skips' fields, plus one weight per prior of :data:`clsdcam.priors.PRIORS`
+(generated from the table, so a new prior is a field and a ``--flag`` without touching this file).
+
+Weights are relative to the data (see :mod:`clsdcam.priors`). Every value is checked on construction
+(an :class:`~clsdcam.errors.InputError` naming the option).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, make_dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .priors import PRIORS
+
+DEFAULT_ITERS = 300
+DEFAULT_TOL = 0.0
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """The fields that are not prior weights."""
+
+    iters: int = DEFAULT_ITERS
+    tv_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)  # x, y, λ
+    tol: float = DEFAULT_TOL
+    plateau: float = 0.0           # stop when F fell by less than this (relative) between checkpoints
+    skip: bool = True              # skip what the scene doesn't need (False: the full solver)
+    rank: int = 0                  # spectral basis vectors: 0 = automatic, ≥ K = no subspace
+    dtype: str = "float32"
+    objective_every: int = 10      # F(x) evaluated (and the best iterate kept) this often
+    restart: bool = True           # adaptive momentum restart (O'Donoghue–Candès)
+    step_scale: float = 1.0        # step = step_scale / L; > 1 only to test the back-off
+    full_field: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "tv_weights", tuple(float(w) for w in self.tv_weights))
+        _require(_is_int(self.iters) and self.iters >= 1, f"--iters {self.iters}: must be an integer ≥ 1")
+        _require(_finite_nonneg(self.step_scale) and self.step_scale > 0, f"step_scale {self.step_scale}: must be > 0")
+        _require(_is_int(self.rank) and self.rank >= 0, f"--rank {self.rank}: must be an integer ≥ 0")
+        for name in ("tol", "plateau") + tuple(row.name for row in PRIORS):
+            value = getattr(self, name)
+            _require(_finite_nonneg(value), f"--{name.replace('_', '-')} {value}: must be a finite number ≥ 0")
+        _require(len(self.tv_weights) == 3 and all(_finite_nonneg(w) for w in self.tv_weights),
+                 f"--tv-weights {self.tv_weights}: expected three finite numbers ≥ 0 (x, y, λ)")
+        _require(self.objective_every >= 1, f"objective_every {self.objective_every}: must be ≥ 1")
+
+
+Settings = make_dataclass(
+    "Settings", [(row.name, float, field(default=row.default)) for row in PRIORS], bases=(SolverSettings,),
+    frozen=True, namespace={"__doc__": "Solver settings: SolverSettings' fields and one relative weight per prior "
+                                       "(clsdcam.priors.PRIORS: " + ", ".join(row.name for row in PRIORS) + ").",
+                                       "__module__": __name__})
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def _finite_nonneg(value) -> bool:
+    return isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value >= 0
+
+
+def _require(condition: bool, message: str):
+    if not condition:
+        raise InputError(message)
