@@ -25,12 +25,13 @@ import numpy as np
 from . import sim
 from .calibration import Calibration
 from .metrics import psnr, spectral_angle
+from .sim.scenes import SOURCE_FWHM, source_cube, source_lines, source_positions
 from .solver import reconstruct
 
 COND_LIMIT = 40.0
 RAYLEIGH_DIP = 0.735          # resolved when the dip between two peaks is ≤ 73.5 % of the weaker peak
 TWO_POINT_WAVELENGTHS = (618.0, 522.0, 466.0)
-LINE_FWHM = 10.0              # nm, the narrow-band sources of the spectral and two-point analyses
+LINE_FWHM = SOURCE_FWHM       # nm, the narrow-band sources of the spectral and two-point analyses
 NOISE_VAR, PHOTONS = 1e-5, 20000.0   # the simulator's default read and shot noise
 SINGULAR = 1.0 / np.finfo(np.float64).eps   # κ reported for numerically singular groups
 FULL_SOLVER = {"skip": False}  # the reconstruction analyses run the full solver (see the module's docstring)
@@ -198,25 +199,15 @@ def peak_wavelength(spectrum, wavelengths) -> float:
     return float(np.interp(i + np.clip(shift, -1, 1), np.arange(len(wavelengths)), wavelengths))
 
 
-def spread_grid(shape, n: int) -> list[tuple[int, int]]:
-    """n pixels on a ⌈√n⌉-wide grid spread over the central two thirds of the frame."""
-    side = int(np.ceil(np.sqrt(n)))
-    ys, xs = (np.round(np.linspace(s / 6, 5 * s / 6, side)).astype(int) for s in shape)
-    return [(int(ys[i // side]), int(xs[i % side])) for i in range(n)]
-
-
 def spectral_accuracy(shape=(64, 96), n_bands: int = 64, n_sources: int = 16, iters: int = 200, seed: int = 0) -> dict:
     """Single-pixel sources of 10 nm lines at n_sources wavelengths evenly over the band centres
-    (390–894 nm at 64 bands), all in one frame, one reconstruction; each source's peak found by
-    :func:`peak_wavelength` on the spectrum summed over its 3 × 3 neighbourhood."""
+    (390–894 nm at 64 bands), all in one frame (the simulator's ``sources`` scene), one reconstruction;
+    each source's peak found by :func:`peak_wavelength` on the spectrum summed over its 3 × 3 neighbourhood."""
     calibration = camera(shape, n_bands, seed)
     wavelengths = calibration.wavelengths
-    centres = np.linspace(wavelengths[0], wavelengths[-1], n_sources)
-    positions = spread_grid(shape, n_sources)
-    truth = np.zeros((n_bands,) + tuple(shape), np.float32)
-    for (y, x), centre in zip(positions, centres):
-        truth[:, y, x] = line_spectrum(centre, wavelengths)
-    cube = simulate_and_reconstruct(truth, calibration, iters, seed)
+    centres, positions = source_lines(wavelengths, n_sources), source_positions(shape, n_sources)
+    cube = simulate_and_reconstruct(source_cube(shape, wavelengths, n_sources).astype(np.float32), calibration,
+                                    iters, seed)
     found = np.array([peak_wavelength(cube[:, y - 1:y + 2, x - 1:x + 2].sum(axis=(1, 2)), wavelengths)
                       for y, x in positions])
     errors = found - centres

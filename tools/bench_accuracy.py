@@ -1,0 +1,169 @@
+#!/usr/bin/env python3
+"""Accuracy panel: the default solver against the full solver (``--no-skip``), PSNR and mean spectral angle
+at fixed iterations, on every simulated scene, plus a sweep of fixed TV weights and the real hand (K = 1).
+
+    python tools/bench_accuracy.py --size 320x448 --bands 64 --marks 50,100,300,500 --out accuracy
+
+Scenes: the README's four (target, leds, piecewise, realcube), the paper's point sources (``sources``: 16
+single-pixel 10 nm lines, with each source's peak-wavelength error) and narrow lines at the range's ends, on
+bin boundaries and one faint (``lines``). A scene passes when, at every mark, the default's PSNR is at least
+the full solver's − 0.2 dB and its spectral angle at most the full solver's + 0.5°. ``--sweep`` adds the
+default solver at fixed ``--tv`` weights (the best of them against the default's weight choice). ``--hand``
+adds the DiffuserCam tutorial's hand (``../shared/data``; dark corner subtracted, binned 4×): correlation of
+each run with a long ``--no-skip`` run at ``--hand-tv``. Writes ``accuracy.json`` and ``accuracy.md``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from clsdcam.analysis import peak_wavelength
+from clsdcam.metrics import psnr, spectral_angle
+from clsdcam.sim import shared_data_dir, simulate
+from clsdcam.sim.scenes import source_lines, source_positions
+from clsdcam.solver import Settings, Solver
+
+SCENES = ("target", "leds", "piecewise", "realcube", "sources", "lines")
+CONFIGS = {"default": {}, "--no-skip": {"skip": False}}
+PSNR_MARGIN_DB, ANGLE_MARGIN_DEG = 0.2, 0.5
+HAND = ("psf/diffusercam_tutorial_psf_sample.tif", "psf/diffusercam_tutorial_rawdata_hand_sample.tif")
+HAND_BIN, DARK_CORNER = 4, (slice(5, 15), slice(5, 15))
+
+
+def solve(calibration, measurement, fields: dict, marks) -> tuple[dict, dict]:
+    """{iteration: cube} at ``marks`` and the result's attributes (plus seconds per iteration)."""
+    solver = Solver(calibration, settings=Settings(iters=max(marks), **fields))
+    start = time.perf_counter()
+    result = solver.solve(measurement, snapshots=marks)
+    attrs = {key: result.attrs[key] for key in ("tv", "final_rank", "fft_work_saved") if key in result.attrs}
+    attrs["tv_chosen"] = result.attrs.get("tv_chosen", result.attrs.get("tv"))
+    attrs["seconds"] = time.perf_counter() - start
+    return result.snapshots, attrs
+
+
+def scene_points(scene: str, sim, snapshots: dict) -> list[dict]:
+    """PSNR and spectral angle at each mark; for ``sources`` also the median and worst peak error (nm)."""
+    points = []
+    for k, cube in sorted(snapshots.items()):
+        point = {"iteration": k, "psnr": psnr(cube, sim.truth), "angle": spectral_angle(cube, sim.truth)}
+        if scene == "sources":
+            errors = np.abs(source_peaks(cube, sim.calibration.wavelengths) -
+                            source_lines(sim.calibration.wavelengths))
+            point.update(median_peak_nm=float(np.median(errors)), worst_peak_nm=float(errors.max()))
+        points.append(point)
+    return points
+
+
+def source_peaks(cube, wavelengths) -> np.ndarray:
+    """Each source's peak wavelength on the spectrum summed over its 3 × 3 neighbourhood (as clsdcam analyze)."""
+    return np.array([peak_wavelength(cube[:, y - 1:y + 2, x - 1:x + 2].sum(axis=(1, 2)), wavelengths)
+                     for y, x in source_positions(cube.shape[1:])])
+
+
+def run_scene(scene: str, shape, bands: int, marks, sweep) -> dict:
+    sim = simulate(scene=scene, shape=shape, n_bands=bands, seed=0)
+    runs = {}
+    for name, fields in CONFIGS.items():
+        snapshots, attrs = solve(sim.calibration, sim.measurement, fields, marks)
+        runs[name] = {"points": scene_points(scene, sim, snapshots), **attrs}
+        print(f"  {scene} {name}: {attrs['seconds']:.0f} s", file=sys.stderr, flush=True)
+    for tv in sweep:
+        snapshots, attrs = solve(sim.calibration, sim.measurement, {"tv": tv}, marks)
+        runs[f"--tv {tv:g}"] = {"points": scene_points(scene, sim, snapshots), **attrs}
+    return runs
+
+
+def binned(path: Path) -> np.ndarray:
+    """A raw tutorial frame: the dark corner's mean subtracted, clipped at 0, HAND_BIN× block means."""
+    import tifffile
+
+    from clsdcam.analysis import bin_pixels
+
+    image = tifffile.imread(path).astype(np.float64)
+    return bin_pixels(np.maximum(image - image[DARK_CORNER].mean(), 0.0), HAND_BIN)
+
+
+def run_hand(marks, sweep, reference_iters: int, reference_tv: float) -> dict | None:
+    """The hand (K = 1): correlation of each run's image with a long ``--no-skip`` run at ``reference_tv``."""
+    from clsdcam.calibration import Calibration
+
+    paths = [shared_data_dir() / relative for relative in HAND]
+    if not all(p.exists() for p in paths):
+        print("  hand: ../shared/data not present, skipped", file=sys.stderr)
+        return None
+    psf, raw = (binned(p) for p in paths)
+    calibration = Calibration(psf / np.linalg.norm(psf), np.ones((1,) + psf.shape), [550.0], source="tutorial")
+    reference = solve(calibration, raw, {"skip": False, "tv": reference_tv}, [reference_iters])[0][reference_iters]
+    runs = {}
+    for name, fields in {"default": {}, **{f"--tv {tv:g}": {"tv": tv} for tv in sweep}}.items():
+        snapshots, attrs = solve(calibration, raw, fields, marks)
+        runs[name] = {"points": [{"iteration": k, "correlation": float(np.corrcoef(c.ravel(), reference.ravel())[0, 1])}
+                                 for k, c in sorted(snapshots.items())], **attrs}
+    return {"reference": f"--no-skip --tv {reference_tv:g}, {reference_iters} iterations", "runs": runs}
+
+
+def verdict(runs: dict) -> str:
+    """'yes' when the default is within the margins of the full solver at every mark, else where it is not."""
+    misses = [f"{d['iteration']}: {d['psnr'] - f['psnr']:+.2f} dB, {d['angle'] - f['angle']:+.1f}°"
+              for d, f in zip(runs["default"]["points"], runs["--no-skip"]["points"])
+              if d["psnr"] < f["psnr"] - PSNR_MARGIN_DB or d["angle"] > f["angle"] + ANGLE_MARGIN_DEG]
+    return "yes" if not misses else "no (" + "; ".join(misses) + ")"
+
+
+def markdown(results: dict, marks) -> str:
+    lines = ["| scene | run | τ | " + " | ".join(f"{m} it: PSNR / SA" for m in marks) + " | passes |",
+             "|---|---|---:|" + "---|" * len(marks) + "---|"]
+    for scene, runs in results["scenes"].items():
+        for name, run in runs.items():
+            cells = [f"{p['psnr']:.2f} dB / {p['angle']:.2f}°" + (f" (peaks {p['median_peak_nm']:.1f} / "
+                                                                 f"{p['worst_peak_nm']:.1f} nm)" if "worst_peak_nm" in p
+                                                                 else "") for p in run["points"]]
+            mark = verdict(runs) if name == "default" else ""
+            lines.append(f"| {scene} | {name} | {run['tv_chosen']:.3g} | " + " | ".join(cells) + f" | {mark} |")
+    hand = results.get("hand")
+    if hand:
+        lines += ["", f"Hand (K = 1), correlation with {hand['reference']}:", "",
+                  "| run | τ | " + " | ".join(f"{m} it" for m in marks) + " |", "|---|---:|" + "---:|" * len(marks)]
+        for name, run in hand["runs"].items():
+            lines.append(f"| {name} | {run['tv_chosen']:.3g} | " +
+                         " | ".join(f"{p['correlation']:.4f}" for p in run["points"]) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", default=",".join(SCENES))
+    parser.add_argument("--size", default="320x448")
+    parser.add_argument("--bands", type=int, default=64)
+    parser.add_argument("--marks", default="50,100,300,500")
+    parser.add_argument("--sweep", default="", help="fixed --tv weights to compare, e.g. 1e-4,3e-4,1e-3,3e-3")
+    parser.add_argument("--hand", action="store_true", help="also the real hand (K = 1) from ../shared/data")
+    parser.add_argument("--hand-tv", type=float, default=1e-4, help="--tv of the hand's long --no-skip reference")
+    parser.add_argument("--hand-reference-iters", type=int, default=1000)
+    parser.add_argument("--out", default="accuracy")
+    args = parser.parse_args(argv)
+    shape = tuple(int(v) for v in args.size.split("x"))
+    marks = [int(m) for m in args.marks.split(",")]
+    sweep = [float(t) for t in args.sweep.split(",") if t]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    results = {"size": args.size, "bands": args.bands, "marks": marks, "scenes": {}}
+    for scene in args.scenes.split(","):
+        results["scenes"][scene] = run_scene(scene, shape, args.bands, marks, sweep)
+        (out / "accuracy.json").write_text(json.dumps(results, indent=1))       # partial results survive a stop
+    if args.hand:
+        results["hand"] = run_hand(marks, sweep, args.hand_reference_iters, args.hand_tv)
+    text = markdown(results, marks)
+    print(text)
+    (out / "accuracy.json").write_text(json.dumps(results, indent=1))
+    (out / "accuracy.md").write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
