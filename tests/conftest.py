@@ -1,5 +1,6 @@
-"""Shared fixtures: the real data beside the repository, skipped cleanly when absent."""
+"""Shared fixtures: the real data beside the repository (skipped cleanly when absent), a known SIGINT handler."""
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -23,3 +24,12 @@ def shared_data():
         return path
 
     return get
+
+
+@pytest.fixture
+def default_sigint():
+    """Python's default SIGINT handler (KeyboardInterrupt) for the test, whatever the runner inherited (a run
+    started in the background with ``nohup`` or ``&`` ignores SIGINT); the inherited handler after it."""
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, inherited)

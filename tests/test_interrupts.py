@@ -7,7 +7,7 @@ import pytest
 from clsdcam.interrupts import held_interrupt
 
 
-def test_a_sigint_in_the_block_is_raised_after_it_and_the_handler_restored():
+def test_a_sigint_in_the_block_is_raised_after_it_and_the_handler_restored(default_sigint):
     finished = []
     with pytest.raises(KeyboardInterrupt):
         with held_interrupt():

@@ -86,7 +86,7 @@ def test_few_bands_stay_in_band_space():
 
 
 @pytest.mark.parametrize("move, after", [("_enter_subspace", WARMUP), ("_check_width", WARMUP + CHECK_EVERY)])
-def test_ctrl_c_while_the_iterates_change_space_stops_with_a_whole_cube(leds, monkeypatch, move, after):
+def test_ctrl_c_while_the_iterates_change_space_stops_with_a_whole_cube(leds, monkeypatch, move, after, default_sigint):
     """A SIGINT during a move between spaces lets the move finish, then stops as "interrupted" with the cube of
     the space the iterates are in (it used to escape the solve as a KeyboardInterrupt, losing the cube)."""
     original = getattr(Phases, move)
