@@ -10,11 +10,9 @@ reconstructions of spectral accuracy, two-point resolution and the three designs
   c = (H//2, W//2) lands on (y, x) (equal to A applied to the unit voxel; tested) — A is
   never formed. 2-D: n points on a grid of spacing d in one band; 3-D: the same points in
   two adjacent bands (2n columns). κ is averaged geometrically over random placements.
-- Reconstruction analyses (the full solver, as the paper's, with the default weights, on simulated
-  frames): spectral accuracy of narrow-band points, two-point resolution by the Rayleigh
-  criterion, and the diffuser against low- and high-NA lenses on the same filter array. They
-  characterise the camera, not the skips: a spectral subspace fitted to a few iterations can miss
-  a faint narrow line (README, "What is skipped").
+- Reconstruction analyses (the default solver, with the default weights, on simulated frames):
+  spectral accuracy of narrow-band points, two-point resolution by the Rayleigh criterion, and the
+  diffuser against low- and high-NA lenses on the same filter array.
 """
 from __future__ import annotations
 
@@ -34,7 +32,6 @@ TWO_POINT_WAVELENGTHS = (618.0, 522.0, 466.0)
 LINE_FWHM = SOURCE_FWHM       # nm, the narrow-band sources of the spectral and two-point analyses
 NOISE_VAR, PHOTONS = 1e-5, 20000.0   # the simulator's default read and shot noise
 SINGULAR = 1.0 / np.finfo(np.float64).eps   # κ reported for numerically singular groups
-FULL_SOLVER = {"skip": False}  # the reconstruction analyses run the full solver (see the module's docstring)
 
 
 # ---- resolution from the PSF ------------------------------------------------------------------
@@ -177,7 +174,7 @@ def simulate_and_reconstruct(truth: np.ndarray, calibration: Calibration, iters:
     """b = A v + shot and read noise (the simulator's defaults), clipped at 0; the solver's cube."""
     clean = sim.noiseless_measurement(calibration.psf, calibration.filters, truth)
     noisy = sim.add_noise(clean, np.random.default_rng(seed), NOISE_VAR, PHOTONS)
-    return reconstruct(np.maximum(noisy, 0.0).astype(np.float32), calibration, iters=iters, **FULL_SOLVER).cube
+    return reconstruct(np.maximum(noisy, 0.0).astype(np.float32), calibration, iters=iters).cube
 
 
 def line_spectrum(centre: float, wavelengths) -> np.ndarray:
@@ -262,7 +259,7 @@ def design_comparison(shape=(64, 96), n_bands: int = 64, iters: int = 200, seed:
     rows = {}
     for name, build in sim.DESIGNS.items():
         simulation = sim.simulate("target", shape, n_bands, seed, psf=build(shape, seed))
-        cube = reconstruct(simulation.measurement, simulation.calibration, iters=iters, **FULL_SOLVER).cube
+        cube = reconstruct(simulation.measurement, simulation.calibration, iters=iters).cube
         rows[name] = {"psnr": psnr(cube, simulation.truth), "angle": spectral_angle(cube, simulation.truth),
                       "cube": cube, "wavelengths": simulation.calibration.wavelengths, "truth": simulation.truth}
     return rows

@@ -1,84 +1,55 @@
-"""The solver's phases: band space, then the spectral subspace when the scene's spectra span few dimensions.
+"""The solver's phases: band space, then the spectral subspace once the scene's spectra have settled.
 
-1. Band space for ``WARMUP`` iterations (none after a warm start, whose spectra are known).
-2. The spectra of the iterate x (eigen-decomposition of its K × K Gram matrix) give the basis:
-   the fewest directions holding all but ``START_TAIL`` of x's energy (or ``--rank R``). If that
-   is more than K/2 vectors the subspace would not pay, and the solve stays in band space.
-   FISTA moves onto the basis (c = Bᵀx) and goes on with A·B (4r FFTs per iteration).
-3. Every ``CHECK_EVERY`` iterations, one full-space proximal-gradient step from v = B·c,
-   x⁺ = prox(v − ∇f(v)/L), says whether the basis is right (with ``--rank R`` only the second
-   answer applies: r stays R):
-   - when it lowers the data term ½‖Av − b‖² by more than ``WIDEN_GAIN`` (relative), the
-     measurement holds spectral content the basis cannot represent: the basis grows by the
-     leading spectral directions of x⁺'s part outside it (doubling r), losslessly (FISTA keeps its
-     iterates and momentum); when r would pass K/2 the solve returns to band space;
-   - otherwise the rank is enough but the basis, taken from an early iterate, holds its spectra
-     only approximately (blurred lines, say): it is re-estimated from x⁺'s spectra at the same
-     rank, and the iterates are projected onto it (momentum kept). The full step sharpens the
-     spectra a little each time, so the subspace follows the full problem instead of freezing an
-     early guess (on the LED grid, 500 iterations: 42.8 dB against 40.6 dB without).
+The basis is read from the spectra as the spectral angle weighs them: the unit spectra of the lit pixels
+of the sensor window (:func:`clsdcam.subspace.lit_shapes`), so a faint object's spectrum counts as much
+as a bright one's; ``rank_for(ENTRY_TAIL)`` directions leave at most that mean sin² of them outside.
 
-Every phase, check and widening is counted in the history (``rank``, ``transforms``) and the
-skip report.
+1. Band space for ``WARMUP`` iterations, then until the spectra settle: every ``SETTLE_EVERY``
+   iterations the basis is read again, and the solve moves on once the previous basis holds the current
+   lit spectra within ``SETTLED`` (mean sin²) of the current one, and at most K/2 vectors hold them. A
+   subspace entered before then freezes spectra that band space is still finding (a faint line, a line
+   at a weak filter's edge); spectra that never settle into K/2 directions are solved in band space.
+   After a warm start the spectra are known: no warm-up; with ``--rank R`` WARMUP iterations only.
+2. FISTA moves onto the basis (c = Bᵀx, ``--rank R``: R vectors) and goes on with A·B (4r FFTs per
+   iteration). A basis of more than K/2 vectors would not pay: the solve stays in band space.
+3. Every ``CHECK_EVERY`` iterations one full-space proximal-gradient step from v = B·c,
+   x⁺ = prox(v − ∇f(v)/L), updates the basis: its lit spectra are read again, at a rank that never
+   falls (spectra the scene has shown stay: "core" rank) but grows when they need more directions;
+   when the full step also lowers the data term ½‖Av − b‖² by more than ``WIDEN_GAIN`` (relative), the
+   measurement holds content the basis cannot represent, and up to as many directions again are added:
+   those the step turns the lit spectra towards (:func:`clsdcam.subspace.turning_directions`). FISTA
+   moves to the new basis with its momentum. When r would pass K/2 the solve returns to band space.
+
+Weights set to ``auto`` (:mod:`clsdcam.priors`) start at their rule's start and are chosen at iteration
+``AUTO_AT`` from the noise level of that iterate's residual (:mod:`clsdcam.noise`), in every space
+(``--no-skip`` too); FISTA goes on with its momentum under the new objective.
+
+Every phase, check and widening is counted in the history (``rank``, ``transforms``) and the skip report.
 """
 from __future__ import annotations
 
-import math
-from typing import Callable
-
 import numpy as np
 
-from .geometry import centred_geometry
 from .interrupts import held_interrupt
+from .noise import residual_noise
 from .problem import Problem
-from .skips import SkipReport, subspace_line
-from .subspace import Spectra, SpectralSubspace
+from .skips import subspace_line
+from .subspace import Spectra, SpectralSubspace, lit_shapes, turning_directions
+from .tracker import Tracker
 
 WARMUP = 10
+SETTLE_EVERY = 10
+SETTLED = 5e-3             # the previous basis holds the spectra this close to the current one: settled
+ENTRY_TAIL = 5e-3          # the basis leaves at most this mean sin² of the lit spectra outside
 CHECK_EVERY = 25
-START_TAIL = 5e-2
 WIDEN_GAIN = 1e-2
+AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
 MAX_RANK_FRACTION = 0.5
 
 
-def in_data_units(record: dict, scale: float) -> dict:
-    """A copy of a FISTA record (solver units, b / max|b|) with the data term and objective in data units (×s²)."""
-    return {**record, "data": record["data"] * scale ** 2, "objective": record["objective"] * scale ** 2}
-
-
-class Tracker:
-    """Per-iteration bookkeeping: data units, rank and FFTs of each iteration, snapshots, progress, FFT work."""
-
-    def __init__(self, model, scale: float, snapshots=(), progress: Callable[[dict], None] | None = None):
-        self.model = model
-        self.scale = scale
-        self.snapshots = set(snapshots)
-        self.progress = progress
-        self.kept: dict[int, np.ndarray] = {}
-        self.report = SkipReport()
-        self.voxels = model.geometry.voxels_per_band
-        self.paper_voxels = centred_geometry(model.sensor_shape).voxels_per_band
-        self.full_transforms = 4 * model.n_bands        # the full solver's gradient step
-
-    def on(self, problem: Problem):
-        """FISTA's on_iteration callback for iterations in ``problem``'s space: adds the rank and transforms to
-        the record (its numbers stay in solver units: FISTA's rules compare them); progress gets data units."""
-        def on_iteration(record: dict, x):
-            evaluated = math.isfinite(record["objective"])
-            transforms = problem.transforms() * (3 if evaluated else 2) // 2     # + a forward for F(x)
-            record["rank"] = problem.rank
-            record["transforms"] = transforms
-            self.count(transforms, self.full_transforms * (3 if evaluated else 2) // 2)
-            if record["iteration"] in self.snapshots:
-                self.kept[record["iteration"]] = (self.model.window(problem.solution(x)) * self.scale).astype(np.float32)
-            if self.progress is not None:
-                self.progress(in_data_units(record, self.scale))
-        return on_iteration
-
-    def count(self, transforms: int, full_transforms: int = 0):
-        """Add FFT work done (at this field) and the full solver's (at the paper's field)."""
-        self.report.done_work += transforms * self.voxels
-        self.report.full_work += full_transforms * self.paper_voxels
+def held(shapes: np.ndarray, basis: np.ndarray) -> float:
+    """Mean cos² of unit spectra (K, N) in span(basis): 1 − their mean sin² outside it."""
+    return float(np.mean(np.sum((basis.T @ shapes) ** 2, axis=0))) if shapes.shape[1] else 1.0
 
 
 class Phases:
@@ -96,7 +67,9 @@ class Phases:
         self._full: Problem | None = None
         self._buffers: dict = {}
         self._lipschitz = solver.lipschitz          # of the space the loop is in
-        self._refreshes = 0                         # bases re-estimated at the same rank
+        self._core = 0                              # directions the scene's spectra have needed so far
+        self._refreshes = 0                         # bases re-read at the same rank
+        self.chosen: dict = {}                      # what auto weights chose, for the result's attributes
 
     def run(self, problem: Problem, warm_started: bool) -> tuple[str, Problem]:
         """(stop reason, the problem the final iterate lives in)."""
@@ -109,7 +82,7 @@ class Phases:
     def _run_phases(self, warm_started: bool) -> str:
         iters, loop = self.settings.iters, self.loop
         if self._subspace_allowed():
-            reason = self._run(self.problem, 0 if warm_started else min(WARMUP, iters))
+            reason = None if warm_started else self._warm_up()
             if reason:
                 return reason
             if loop.iterations < iters:
@@ -126,13 +99,56 @@ class Phases:
                     self.problem = self._check_width(self.problem)
         return "iterations"
 
+    def _warm_up(self) -> str | None:
+        """Band space for WARMUP iterations, then until consecutive bases settle; a stop reason or None."""
+        iters, loop = self.settings.iters, self.loop
+        reason = self._run(self.problem, min(WARMUP, iters))
+        if self.settings.rank:            # the user chose the basis's size: no waiting for the spectra
+            return reason
+        previous = self._window_spectra()[1]
+        while not reason and loop.iterations < iters:
+            reason = self._run(self.problem, min(SETTLE_EVERY, iters - loop.iterations))
+            _, current, shapes = self._window_spectra()
+            settled = held(shapes, current) - held(shapes, previous) <= SETTLED
+            if settled and current.shape[1] <= self.n_bands * MAX_RANK_FRACTION:
+                break
+            previous = current
+        return reason
+
+    def _window_spectra(self) -> tuple[Spectra, np.ndarray, np.ndarray]:
+        """(spectra, their basis at the entry rank (or --rank), the lit unit spectra) of the band-space iterate."""
+        shapes = lit_shapes(self.solver.model.window(self.loop.x))
+        spectra = Spectra.of_shapes(shapes)
+        return spectra, spectra.basis(self.settings.rank or spectra.rank_for(ENTRY_TAIL)), shapes
+
     def refreshes_line(self) -> str | None:
-        """How often the basis was re-estimated at the same rank (for the skip report)."""
-        return (f"subspace basis re-estimated from a full step {self._refreshes} times at the same rank"
+        """How often the basis was read again at the same rank (for the skip report)."""
+        return (f"subspace basis re-read from a full step's spectra {self._refreshes} times at the same rank"
                 if self._refreshes else None)
 
     def _run(self, problem: Problem, iters: int) -> str | None:
-        return self.loop.run(problem.gradient_step, problem.prox, iters, self.tracker.on(problem))
+        """Up to ``iters`` iterations in ``problem``'s space, choosing auto weights on the way at AUTO_AT."""
+        loop, pending = self.loop, [prior for prior in self.priors if prior.auto]
+        if pending and loop.iterations < AUTO_AT <= loop.iterations + iters:
+            first = AUTO_AT - loop.iterations
+            reason = loop.run(problem.gradient_step, problem.prox, first, self.tracker.on(problem))
+            if reason:
+                return reason
+            self._choose_weights(problem, pending)
+            iters -= first
+        return loop.run(problem.gradient_step, problem.prox, iters, self.tracker.on(problem))
+
+    def _choose_weights(self, problem: Problem, pending: list):
+        """Auto weights from the noise σ̂ of the current residual (b / max|b|: σ̂ relative to max|b|)."""
+        noise = residual_noise(self.backend.to_host(problem.residual(self.loop.x)))
+        for prior in pending:
+            prior.set_relative(prior.auto_weight.for_noise(noise))
+            prior.auto = False
+            self.tracker.report.lines.append(
+                f"{prior.name}: auto, {prior.relative:.3g} (noise σ ≈ {noise:.3g} of max|b|, from the residual at "
+                f"iteration {self.loop.iterations})")
+        self.chosen["noise_estimate"] = noise
+        self.loop.change_space(self.backend.copy, self.loop.step, problem.objective)
 
     def _subspace_allowed(self) -> bool:
         s = self.settings
@@ -144,27 +160,20 @@ class Phases:
 
     # ---- entering the subspace --------------------------------------------------------------
     def _enter_subspace(self, problem: Problem) -> Problem:
-        spectra = Spectra.of(self.backend, self.loop.x)
-        rank = self.settings.rank or self._automatic_rank(spectra)
+        spectra, basis, _ = self._window_spectra()
+        rank = basis.shape[1]
         report = self.tracker.report
         if rank > self.n_bands * MAX_RANK_FRACTION and not self.settings.rank:
             report.lines.append(subspace_line(self.n_bands, self.n_bands, 0, 1.0,
                                               f"{rank} directions hold the spectra: band space is cheaper"))
             return problem
-        subspace = self._subspace_problem(spectra.basis(rank))
+        self._core = rank
+        subspace = self._subspace_problem(basis)
         self.loop.change_space(subspace.subspace.project, self._step(subspace.subspace.lipschitz), subspace.objective)
-        how = f"--rank {rank}" if self.settings.rank else f"all but {START_TAIL:g} of the energy"
+        how = f"--rank {rank}" if self.settings.rank else \
+            f"spectra settled; a mean sin² of at most {ENTRY_TAIL:g} of the lit spectra outside"
         report.lines.append(subspace_line(rank, self.n_bands, self.loop.iterations + 1, spectra.captured(rank), how))
         return subspace
-
-    @staticmethod
-    def _automatic_rank(spectra: Spectra) -> int:
-        """The fewest directions holding all but START_TAIL of the iterate's energy."""
-        total = spectra.energies.sum()
-        if total <= 0:
-            return 1
-        held = np.cumsum(spectra.energies) / total
-        return int(np.searchsorted(held, 1.0 - START_TAIL) + 1)
 
     def _subspace_problem(self, basis: np.ndarray, start=None) -> Problem:
         sub = SpectralSubspace(self.solver.model, basis, self.priors, self.solver.calibration.filters, start)
@@ -182,24 +191,29 @@ class Phases:
 
     # ---- widening -------------------------------------------------------------------------------
     def _check_width(self, problem: Problem) -> Problem:
-        """One full proximal-gradient step from v = B·c: widen the basis, or re-estimate it at the same rank."""
-        sub, be = problem.subspace, self.backend
+        """One full proximal-gradient step from v = B·c: the basis read again from its lit spectra (never fewer
+        directions than the scene has needed), widened when the step lowers the data term by WIDEN_GAIN."""
+        sub, model = problem.subspace, self.solver.model
         full = self._full_problem()
         data = problem.data(self.loop.x)                         # its residual A·B·c − b = A·v − b stays in place
         step = self._full_step()
-        gradient_step = full.model.adjoint(problem.residual_buffer, out=self._cube("z"), y=sub.expand(self.loop.x),
-                                           step=step)            # z = v − step·Aᵀ(Av − b)
-        stepped = full.prox(gradient_step, self._cube("stepped"), step)
+        v = sub.expand(self.loop.x)
+        before = model.window(v)
+        gradient_step = full.model.adjoint(problem.residual_buffer, out=self._cube("z"), y=v, step=step)
+        stepped = full.prox(gradient_step, self._cube("stepped"), step)         # x⁺ = prox(v − step·Aᵀ(Av − b))
         gain = (data - full.data(stepped)) / data if data > 0 else 0.0
         self.tracker.count(problem.transforms() // 2 + full.transforms())      # A·B·c, then Aᵀr and A·x⁺
-        if gain <= WIDEN_GAIN or self.settings.rank:
-            return self._move(sub, Spectra.of(be, stepped).basis(sub.rank))     # same rank, better spectra
-        rank = min(2 * sub.rank, self.n_bands)
-        if rank > self.n_bands * MAX_RANK_FRACTION:
+        spectra = Spectra.of_shapes(lit_shapes(model.window(stepped)))
+        if self.settings.rank:
+            return self._move(sub, spectra.basis(sub.rank))
+        self._core = max(self._core, spectra.rank_for(ENTRY_TAIL))
+        core = spectra.basis(self._core)
+        turns = turning_directions(core, before, model.window(stepped), self._core if gain > WIDEN_GAIN else 0)
+        basis, _ = np.linalg.qr(np.hstack([core, turns]))
+        if basis.shape[1] > self.n_bands * MAX_RANK_FRACTION:
             return self._leave_subspace(problem, gain)
-        outside = be.axpy(-1.0, sub.expand(sub.project(stepped)), stepped, out=self._cube("z"))   # x⁺ − BBᵀx⁺
-        basis, _ = np.linalg.qr(np.hstack([sub.basis, Spectra.of(be, outside).basis(rank - sub.rank)]))
-        self._note(f"subspace widened to {rank} at iteration {self.loop.iterations + 1}", gain)
+        if basis.shape[1] > sub.rank:
+            self._note(f"subspace widened to {basis.shape[1]} at iteration {self.loop.iterations + 1}", gain)
         return self._move(sub, basis)
 
     def _move(self, subspace: SpectralSubspace, basis: np.ndarray) -> Problem:

@@ -13,6 +13,11 @@ pixels×bands unfolding of Aᵀb: nuclear norm), ``lipschitz`` = L = λmax(AᵀA
 term's stiffest curvature). So scaling a measurement by s scales the cube by s, and the same weights
 suit any PSF or filter normalisation.
 
+A weight can also be ``auto`` for a prior with an ``auto_weight`` rule: it starts at a relative weight
+and, once the measurement's noise level σ̂ (relative to max|b|) is known (:mod:`clsdcam.noise`), becomes
+``per_noise``·σ̂. A soft-thresholding denoiser's best threshold grows with the noise (the universal
+threshold is ∝ σ); ``per_noise`` is calibrated on the simulator's scenes (README, "Choosing --tv").
+
 Adding a prior: one class (``prox``, ``value``, ``reference``; the math in its docstring) and one row
 of :data:`PRIORS` (the ``Settings`` field and the ``--flag`` are generated from the row), and one test.
 """
@@ -20,9 +25,24 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Callable, ClassVar
+from typing import Callable, ClassVar, NamedTuple
 
 import numpy as np
+
+AUTO = "auto"
+
+
+class AutoWeight(NamedTuple):
+    """A prior's rule for ``auto``: the relative weight before the noise is known, and per unit of noise."""
+
+    start: float
+    per_noise: float
+    lowest: float
+    highest: float
+
+    def for_noise(self, noise: float) -> float:
+        """per_noise·σ̂, kept within [lowest, highest]."""
+        return float(np.clip(self.per_noise * noise, self.lowest, self.highest))
 
 
 class Prior:
@@ -30,6 +50,7 @@ class Prior:
 
     name: ClassVar[str]
     reference: ClassVar[str]        # what a relative weight of 1 means (see the module docstring)
+    auto_weight: ClassVar[AutoWeight | None] = None     # how ``auto`` chooses the weight (None: no auto)
     # subspace_prox(c, basis, step, out): out = Bᵀ·max(0, prox(B·c)) for coefficients c of basis B, fused;
     # None when the prior has none (the subspace then expands, applies prox_nonneg and projects)
     subspace_prox: ClassVar[Callable | None] = None
@@ -37,6 +58,15 @@ class Prior:
     def __init__(self, backend, weight: float, settings):
         self.backend = backend
         self.weight = float(weight)
+        self.unit = 1.0            # the absolute weight of a relative weight of 1 (set by build_priors)
+        self.auto = False          # whether the weight is still to be chosen from the noise
+
+    @property
+    def relative(self) -> float:
+        return self.weight / self.unit if self.unit else 0.0
+
+    def set_relative(self, relative: float):
+        self.weight = float(relative) * self.unit
 
     @property
     def active(self) -> bool:
@@ -62,6 +92,7 @@ class TotalVariation(Prior):
 
     name = "tv"
     reference = "atb_max"
+    auto_weight = AutoWeight(start=3e-4, per_noise=0.06, lowest=3e-5, highest=3e-3)
 
     def __init__(self, backend, weight: float, settings):
         super().__init__(backend, weight, settings)
@@ -170,7 +201,7 @@ class PriorRow:
     """One prior as users meet it: the ``Settings`` field and ``--flag`` ``name``, default and help."""
 
     prior: type[Prior]
-    default: float
+    default: float | str          # a relative weight, or AUTO for priors with an auto_weight rule
     help: str
 
     @property
@@ -183,7 +214,8 @@ class PriorRow:
 
 
 PRIORS: tuple[PriorRow, ...] = (
-    PriorRow(TotalVariation, 1e-3, "3-D total variation weight, relative to ‖Aᵀb‖∞ (axes weighted by --tv-weights)"),
+    PriorRow(TotalVariation, AUTO, "3-D total variation weight, relative to ‖Aᵀb‖∞ (axes weighted by --tv-weights), "
+                                   "or auto: from the measurement's noise level"),
     PriorRow(LowRank, 0.0, "nuclear-norm (low-rank) weight, relative to σ₁(Aᵀb) (0: off)"),
     PriorRow(Sparsity, 0.0, "L1 (sparsity) weight, relative to ‖Aᵀb‖∞ (0: off)"),
     PriorRow(SpectralSmoothness, 0.0,
@@ -192,13 +224,16 @@ PRIORS: tuple[PriorRow, ...] = (
 
 
 def build_priors(backend, settings, references: Callable[[str], float]) -> list[Prior]:
-    """The active priors of ``settings``: each row's relative weight times ``references(prior.reference)``
-    (called only for the references an active weight needs)."""
+    """The active priors of ``settings``: each row's relative weight (an ``auto`` one's start) times
+    ``references(prior.reference)`` (called only for the references an active weight needs)."""
     priors = []
     for row in PRIORS:
-        relative = getattr(settings, row.name)
+        value = getattr(settings, row.name)
+        relative = row.prior.auto_weight.start if value == AUTO else value
         if relative > 0:
-            prior = row.prior(backend, relative * references(row.prior.reference), settings)
+            unit = references(row.prior.reference)
+            prior = row.prior(backend, relative * unit, settings)
+            prior.unit, prior.auto = unit, value == AUTO
             if prior.active:
                 priors.append(prior)
     return priors

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, make_dataclass
 import numpy as np
 
 from .errors import InputError
-from .priors import PRIORS
+from .priors import AUTO, PRIORS
 
 DEFAULT_ITERS = 300
 DEFAULT_TOL = 0.0
@@ -39,16 +39,22 @@ class SolverSettings:
         _require(_is_int(self.iters) and self.iters >= 1, f"--iters {self.iters}: must be an integer ≥ 1")
         _require(_finite_nonneg(self.step_scale) and self.step_scale > 0, f"step_scale {self.step_scale}: must be > 0")
         _require(_is_int(self.rank) and self.rank >= 0, f"--rank {self.rank}: must be an integer ≥ 0")
-        for name in ("tol", "plateau") + tuple(row.name for row in PRIORS):
+        for name in ("tol", "plateau"):
             value = getattr(self, name)
-            _require(_finite_nonneg(value), f"--{name.replace('_', '-')} {value}: must be a finite number ≥ 0")
+            _require(_finite_nonneg(value), f"--{name} {value}: must be a finite number ≥ 0")
+        for row in PRIORS:
+            value = getattr(self, row.name)
+            if value == AUTO and row.prior.auto_weight:
+                continue
+            _require(_finite_nonneg(value), f"{row.flag} {value}: must be a finite number ≥ 0"
+                     + (" or auto" if row.prior.auto_weight else ""))
         _require(len(self.tv_weights) == 3 and all(_finite_nonneg(w) for w in self.tv_weights),
                  f"--tv-weights {self.tv_weights}: expected three finite numbers ≥ 0 (x, y, λ)")
         _require(self.objective_every >= 1, f"objective_every {self.objective_every}: must be ≥ 1")
 
 
 Settings = make_dataclass(
-    "Settings", [(row.name, float, field(default=row.default)) for row in PRIORS], bases=(SolverSettings,),
+    "Settings", [(row.name, float | str, field(default=row.default)) for row in PRIORS], bases=(SolverSettings,),
     frozen=True, namespace={"__doc__": "Solver settings: SolverSettings' fields and one relative weight per prior "
                                        "(clsdcam.priors.PRIORS: " + ", ".join(row.name for row in PRIORS) + ").",
                                        "__module__": __name__})

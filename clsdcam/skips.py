@@ -71,4 +71,4 @@ def subspace_line(rank: int, n_bands: int, start: int, captured: float, reason: 
         return f"subspace: none ({reason})"
     vectors = "vector" if rank == 1 else "vectors"
     return (f"subspace: {rank} spectral basis {vectors} instead of {n_bands} bands from iteration {start} "
-            f"({100 * captured:.1f}% of the iterate's energy; {reason})")
+            f"(holding {100 * captured:.1f}% of the lit spectra; {reason})")

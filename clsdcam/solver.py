@@ -29,7 +29,8 @@ from .errors import InputError, shape_text
 from .fista import Fista, Rules
 from .io import require_finite
 from .model import ForwardModel
-from .phases import Phases, Tracker, in_data_units
+from .phases import Phases
+from .tracker import Tracker, in_data_units
 from .priors import PRIORS, ProxAverage, build_priors, singular_values
 from .problem import Problem
 from .settings import Settings
@@ -104,6 +105,7 @@ class Solver:
         reason, problem = phases.run(problem, warm_started=x0 is not None)
         tracker.report.lines += [line for line in (phases.refreshes_line(),) if line]
         out = self._result(problem.solution(loop.x), scale, loop.history, reason, priors, loop.step, tracker)
+        out.attrs.update({f"{p.name}_chosen": p.relative for p in priors}, **phases.chosen)
         out.snapshots = tracker.kept
         return out
 

@@ -11,8 +11,12 @@ stays in band space, c⁺ = Bᵀ·prox_g(B·c) (the priors and non-negativity ac
 lone prior with a fused form, as TV's ``backend.subspace_tv``, runs fused), so the iterates are
 exactly the full problem's restricted to span(B).
 
-The basis comes from the spectra the solver has found so far: the leading eigenvectors of
-the K × K Gram matrix of its iterate (the pixels × bands unfolding's right singular vectors).
+The basis comes from the spectra the solver has found so far, weighted as the spectral angle
+weighs them: the unit spectra s_p = x_p/‖x_p‖ of the lit pixels of the sensor window (‖x_p‖ above
+LIT of the brightest, as :func:`clsdcam.metrics.spectral_angle` counts them), so a faint object's
+spectrum counts as much as a bright one's. With S their (K × N) matrix, the leading eigenvectors of
+G = S Sᵀ/N span them best: 1 − Σ_{j≤r} λ_j is the mean sin² of the angle between a lit spectrum and
+span(B) (:class:`Spectra`).
 """
 from __future__ import annotations
 
@@ -23,16 +27,42 @@ import numpy as np
 from .priors import ProxAverage
 
 
+LIT = 0.05     # lit pixels: spectra brighter than this fraction of the brightest (as the spectral angle's)
+
+
+def lit_pixels(window: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(spectra (K, P) float64, lit mask (P,), norms (P,)) of a host (K, H, W) window."""
+    flat = np.asarray(window, np.float64).reshape(window.shape[0], -1)
+    norms = np.linalg.norm(flat, axis=0)
+    return flat, norms > LIT * norms.max() if norms.max() > 0 else norms > 0, norms
+
+
+def lit_shapes(window: np.ndarray) -> np.ndarray:
+    """(K, N) unit spectra s_p = x_p/‖x_p‖ of the lit pixels of a host (K, H, W) window."""
+    flat, lit, norms = lit_pixels(window)
+    return flat[:, lit] / norms[lit]
+
+
 @dataclass(frozen=True)
 class Spectra:
-    """The iterate's spectral decomposition: Gram eigenvalues (descending, ≥ 0) and eigenvectors (K × K)."""
+    """Eigenvalues (descending, ≥ 0) and eigenvectors (K × K) of the Gram matrix of a set of spectra."""
 
     energies: np.ndarray
     vectors: np.ndarray
 
     @classmethod
     def of(cls, backend, x) -> "Spectra":
-        values, vectors = np.linalg.eigh(backend.gram(x))
+        """Of every pixel of a device cube, weighted by its energy."""
+        return cls.from_gram(backend.gram(x))
+
+    @classmethod
+    def of_shapes(cls, shapes: np.ndarray) -> "Spectra":
+        """Of unit spectra (K, N), each counted once: energies are the mean squared cosines per direction."""
+        return cls.from_gram(shapes @ shapes.T / max(shapes.shape[1], 1))
+
+    @classmethod
+    def from_gram(cls, gram: np.ndarray) -> "Spectra":
+        values, vectors = np.linalg.eigh(gram)
         order = np.argsort(values)[::-1]
         return cls(np.clip(values[order], 0, None), vectors[:, order])
 
@@ -40,9 +70,29 @@ class Spectra:
         return np.ascontiguousarray(self.vectors[:, :rank])
 
     def captured(self, rank: int) -> float:
-        """Fraction of the iterate's energy in its first ``rank`` directions."""
+        """Fraction of the energy in the first ``rank`` directions."""
         total = float(self.energies.sum())
         return float(self.energies[:rank].sum()) / total if total > 0 else 1.0
+
+    def rank_for(self, tail: float) -> int:
+        """The fewest directions leaving at most ``tail`` of the energy outside."""
+        total = float(self.energies.sum())
+        if total <= 0:
+            return 1
+        return int(np.searchsorted(np.cumsum(self.energies) / total, 1.0 - tail) + 1)
+
+
+def turning_directions(basis: np.ndarray, before: np.ndarray, after: np.ndarray, most: int) -> np.ndarray:
+    """Spectral directions outside span(B) that a full step from ``before`` to ``after`` (host (K, H, W) windows)
+    turns the lit spectra towards more than it changes them inside: with d_p = (after_p − before_p)/‖after_p‖
+    over the lit pixels of ``after``, the leading eigenvectors of Σ_p d⊥_p d⊥_pᵀ (d⊥ = d − BBᵀd) whose eigenvalue
+    exceeds Σ_p ‖BBᵀd_p‖², at most ``most`` of them (K × m, possibly m = 0)."""
+    flat_after, lit, norms = lit_pixels(after)
+    change = (flat_after[:, lit] - np.asarray(before, np.float64).reshape(after.shape[0], -1)[:, lit]) / norms[lit]
+    inside = basis @ (basis.T @ change)
+    outside = Spectra.from_gram((change - inside) @ (change - inside).T)
+    wanted = outside.energies[:most] > float(np.sum(inside ** 2))
+    return outside.basis(most)[:, wanted]
 
 
 class SpectralSubspace:

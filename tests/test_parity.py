@@ -331,9 +331,11 @@ def test_dropped_temporaries_do_not_corrupt_later_results():
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-@pytest.mark.parametrize("priors", [{"tv": 3e-3}, {"tv": 3e-3, "lowrank": 0.02, "l1": 1e-3}, {"tv": 3e-3, "skip": False}])
+@pytest.mark.parametrize("priors", [{"tv": 3e-3, "rank": 3}, {"tv": 3e-3, "lowrank": 0.02, "l1": 1e-3, "rank": 3},
+                                    {"spectral": 0.05, "rank": 3}, {"skip": False}])
 def test_reconstruction_matches_numpy(simulation, priors, engine):
-    """50 float32 FISTA iterations on a simulated scene: cubes agree to 1e-4 (relative L2)."""
+    """50 float32 FISTA iterations on a simulated scene (band space and subspaces, every prior, tv auto): cubes
+    agree to 1e-4 (relative L2)."""
     from clsdcam import Settings, Solver
 
     settings = Settings(iters=50, **priors)
@@ -341,6 +343,6 @@ def test_reconstruction_matches_numpy(simulation, priors, engine):
     got = Solver(simulation.calibration, backend=opencl("float32", engine), settings=settings).solve(simulation.measurement)
     assert got.attrs["backend"] == "opencl" and got.iterations == 50
     assert [r["rank"] for r in got.history] == [r["rank"] for r in ref.history]     # the same skips taken
-    assert (min(r["rank"] for r in got.history) < 8) == settings.skip              # the subspace path when skipping
+    assert (min(r["rank"] for r in got.history) < 8) == bool(settings.rank)        # the subspace path when asked
     error = np.linalg.norm(got.cube - ref.cube) / np.linalg.norm(ref.cube)
     assert error <= 1e-4

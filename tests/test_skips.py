@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 from clsdcam import Settings, Solver
-from clsdcam.metrics import psnr
+from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.phases import CHECK_EVERY, WARMUP, Phases
 from clsdcam.sim import simulate
+from clsdcam.sim.scenes import FAINT_LINE
 
 
 @pytest.fixture(scope="module")
@@ -19,21 +20,44 @@ def solve(sim, **settings):
     return Solver(sim.calibration, settings=Settings(**settings)).solve(sim.measurement)
 
 
+def entry(result) -> int:
+    """The first iteration in a subspace (0: none)."""
+    return next((r["iteration"] for r in result.history if r["rank"] < result.cube.shape[0]), 0)
+
+
 def test_default_solves_three_led_spectra_in_a_small_subspace_at_least_as_well(leds):
+    """Band space until the spectra settle, then a subspace: no worse than the full solver in PSNR (−0.2 dB) or
+    spectral angle (+0.5°), and cheaper."""
     full, fast = solve(leds, iters=150, skip=False), solve(leds, iters=150)
-    ranks = [r["rank"] for r in fast.history]
-    assert ranks[:WARMUP] == [64] * WARMUP and ranks[WARMUP] <= 16
+    start = entry(fast)
+    assert start > WARMUP and all(r["rank"] == 64 for r in fast.history[:start - 1])
+    assert fast.history[start - 1]["rank"] <= 32
     assert psnr(fast.cube, leds.truth) >= psnr(full.cube, leds.truth) - 0.2
-    assert fast.attrs["fft_work_saved"] > 0.5 and full.attrs["fft_work_saved"] == 0.0
-    assert "subspace:" in fast.attrs["skips"] and "field:" in fast.attrs["skips"]
-    assert fast.cube.min() >= 0
+    assert spectral_angle(fast.cube, leds.truth) <= spectral_angle(full.cube, leds.truth) + 0.5
+    assert fast.attrs["fft_work_saved"] > 0.3 and full.attrs["fft_work_saved"] == 0.0
+    assert "subspace:" in fast.attrs["skips"] and "spectra settled" in fast.attrs["skips"]
+    assert "field:" in fast.attrs["skips"] and fast.cube.min() >= 0
 
 
-def test_the_basis_follows_the_full_problem_when_no_widening_is_needed(leds):
-    """Checks that do not widen re-estimate the basis at the same rank, so the subspace does not freeze the
-    warm-up's spectra: a longer solve keeps improving (and stays at least as good as the full solver)."""
+def test_narrow_lines_and_a_faint_line_keep_their_spectra():
+    """Six narrow lines (two at weak filters' edges, one at a tenth of the others' brightness): the default's
+    spectral angle is no worse than the full solver's + 0.5°, over all lit pixels and over the faint line's
+    pixels alone, which are recovered (a line missing from the basis comes out near 90°)."""
+    sim = simulate(scene="lines", shape=(48, 64), n_bands=64, seed=0)
+    wavelengths = sim.calibration.wavelengths
+    faint = (np.abs(wavelengths[np.argmax(sim.truth, axis=0)] - FAINT_LINE) < 8) & (sim.truth.max(axis=0) > 0)
+    fast, full = solve(sim, iters=300), solve(sim, iters=300, skip=False)
+    assert entry(fast) > 0 and faint.sum() >= 10
+    for mask in (np.ones_like(faint), faint):
+        assert spectral_angle(fast.cube * mask, sim.truth * mask) <= spectral_angle(full.cube * mask, sim.truth * mask) + 0.5
+    assert spectral_angle(fast.cube * faint, sim.truth * faint) < 45.0     # measured: 36° (the full solver: 39°)
+
+
+def test_the_basis_follows_the_full_problem(leds):
+    """Checks read the basis again from a full step's spectra, so the subspace does not freeze the warm-up's
+    spectra: a longer solve keeps improving (and stays at least as good as the full solver)."""
     short, long = solve(leds, iters=100), solve(leds, iters=300)
-    assert "re-estimated from a full step" in long.attrs["skips"]
+    assert "re-read from a full step" in long.attrs["skips"]
     assert psnr(long.cube, leds.truth) > psnr(short.cube, leds.truth)
     assert psnr(long.cube, leds.truth) >= psnr(solve(leds, iters=300, skip=False).cube, leds.truth) - 0.2
 
@@ -71,12 +95,12 @@ def test_fft_work_counts_every_transform(leds):
     assert result.attrs["fft_work_saved"] <= 1 - done / full + 1e-12   # the width checks add work too
 
 
-def test_widening_follows_the_data_and_band_space_is_the_last_resort():
-    """A dense scene with many spectra: the subspace grows, or hands back to band space, never loses accuracy."""
+def test_spectra_that_need_more_than_half_the_bands_stay_in_band_space():
+    """Twelve smooth random spectra over 16 bands never settle into 8 directions: the solve stays in band space
+    (exactly the full problem on the support field) and says so."""
     sim = simulate(scene="piecewise", shape=(48, 64), n_bands=16, seed=2)
     full, fast = solve(sim, iters=150, skip=False), solve(sim, iters=150)
-    ranks = [r["rank"] for r in fast.history]
-    assert ranks[-1] > ranks[WARMUP] and ("widened" in fast.attrs["skips"] or "left" in fast.attrs["skips"])
+    assert {r["rank"] for r in fast.history} == {16} and "subspace:" not in fast.attrs["skips"]
     assert psnr(fast.cube, sim.truth) >= psnr(full.cube, sim.truth) - 0.1
 
 
@@ -85,10 +109,11 @@ def test_few_bands_stay_in_band_space():
     assert {r["rank"] for r in solve(sim, iters=20).history} == {3}
 
 
-@pytest.mark.parametrize("move, after", [("_enter_subspace", WARMUP), ("_check_width", WARMUP + CHECK_EVERY)])
-def test_ctrl_c_while_the_iterates_change_space_stops_with_a_whole_cube(leds, monkeypatch, move, after, default_sigint):
+@pytest.mark.parametrize("move, checks", [("_enter_subspace", 0), ("_check_width", 1)])
+def test_ctrl_c_while_the_iterates_change_space_stops_with_a_whole_cube(leds, monkeypatch, move, checks, default_sigint):
     """A SIGINT during a move between spaces lets the move finish, then stops as "interrupted" with the cube of
     the space the iterates are in (it used to escape the solve as a KeyboardInterrupt, losing the cube)."""
+    after = entry(solve(leds, iters=200)) - 1 + checks * CHECK_EVERY
     original = getattr(Phases, move)
 
     def interrupted_move(self, problem):

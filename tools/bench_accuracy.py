@@ -88,8 +88,9 @@ def binned(path: Path) -> np.ndarray:
     return bin_pixels(np.maximum(image - image[DARK_CORNER].mean(), 0.0), HAND_BIN)
 
 
-def run_hand(marks, sweep, reference_iters: int, reference_tv: float) -> dict | None:
-    """The hand (K = 1): correlation of each run's image with a long ``--no-skip`` run at ``reference_tv``."""
+def run_hand(marks, sweep, reference_iters: int, reference_tv: float, out: Path) -> dict | None:
+    """The hand (K = 1): correlation of each run's image with a long ``--no-skip`` run at ``reference_tv``;
+    ``hand_<run>.png``: each run's image after the last mark, and the reference's."""
     from clsdcam.calibration import Calibration
 
     paths = [shared_data_dir() / relative for relative in HAND]
@@ -99,12 +100,22 @@ def run_hand(marks, sweep, reference_iters: int, reference_tv: float) -> dict | 
     psf, raw = (binned(p) for p in paths)
     calibration = Calibration(psf / np.linalg.norm(psf), np.ones((1,) + psf.shape), [550.0], source="tutorial")
     reference = solve(calibration, raw, {"skip": False, "tv": reference_tv}, [reference_iters])[0][reference_iters]
+    save_grey(out / "hand_reference.png", reference[0])
     runs = {}
     for name, fields in {"default": {}, **{f"--tv {tv:g}": {"tv": tv} for tv in sweep}}.items():
         snapshots, attrs = solve(calibration, raw, fields, marks)
         runs[name] = {"points": [{"iteration": k, "correlation": float(np.corrcoef(c.ravel(), reference.ravel())[0, 1])}
                                  for k, c in sorted(snapshots.items())], **attrs}
+        save_grey(out / f"hand_{name.replace('--tv ', 'tv')}.png", snapshots[max(marks)][0])
     return {"reference": f"--no-skip --tv {reference_tv:g}, {reference_iters} iterations", "runs": runs}
+
+
+def save_grey(path: Path, image: np.ndarray):
+    """A grey PNG of an image, scaled to its 99.5th percentile."""
+    from PIL import Image
+
+    top = np.percentile(image, 99.5) or 1.0
+    Image.fromarray((np.clip(image / top, 0, 1) * 255).astype(np.uint8)).save(path)
 
 
 def verdict(runs: dict) -> str:
@@ -157,7 +168,7 @@ def main(argv=None) -> int:
         results["scenes"][scene] = run_scene(scene, shape, args.bands, marks, sweep)
         (out / "accuracy.json").write_text(json.dumps(results, indent=1))       # partial results survive a stop
     if args.hand:
-        results["hand"] = run_hand(marks, sweep, args.hand_reference_iters, args.hand_tv)
+        results["hand"] = run_hand(marks, sweep, args.hand_reference_iters, args.hand_tv, out)
     text = markdown(results, marks)
     print(text)
     (out / "accuracy.json").write_text(json.dumps(results, indent=1))

@@ -49,6 +49,14 @@ positive_int = integer_at_least(1)
 non_negative_int = integer_at_least(0)
 
 
+def weight(auto: bool):
+    """An argparse type: a number, or ``auto`` when the prior has an auto rule."""
+    def parse(text: str):
+        return text if auto and text == "auto" else number(text)
+
+    return parse
+
+
 def weights(text: str) -> tuple[float, float, float]:
     parts = text.split(",")
     if len(parts) != 3:
@@ -92,8 +100,8 @@ def add_solver_options(p: argparse.ArgumentParser):
 
     p.add_argument("--iters", type=positive_int, default=DEFAULT_ITERS, help=f"FISTA iterations (default {DEFAULT_ITERS})")
     for row in PRIORS:
-        p.add_argument(row.flag, dest=row.name, type=number, default=row.default, metavar="W",
-                       help=f"{row.help} (default {row.default:g})")
+        p.add_argument(row.flag, dest=row.name, type=weight(row.prior.auto_weight is not None), default=row.default,
+                       metavar="W|auto" if row.prior.auto_weight else "W", help=f"{row.help} (default {row.default})")
     p.add_argument("--tv-weights", type=weights, default=(1.0, 1.0, 1.0), metavar="WX,WY,WL",
                    help="TV weights along x, y and λ (default 1,1,1)")
     p.add_argument("--tol", type=number, default=0.0, help="stop when ‖Δx‖/‖x‖ < TOL (default: off)")

@@ -1,0 +1,52 @@
+"""Per-iteration bookkeeping of one solve: the rank and FFTs of each iteration, the FFT work against the full
+solver's, snapshots of the cube, and progress reports in data units."""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+
+from .geometry import centred_geometry
+from .problem import Problem
+from .skips import SkipReport
+
+
+def in_data_units(record: dict, scale: float) -> dict:
+    """A copy of a FISTA record (solver units, b / max|b|) with the data term and objective in data units (×s²)."""
+    return {**record, "data": record["data"] * scale ** 2, "objective": record["objective"] * scale ** 2}
+
+
+class Tracker:
+    """Per-iteration bookkeeping: data units, rank and FFTs of each iteration, snapshots, progress, FFT work."""
+
+    def __init__(self, model, scale: float, snapshots=(), progress: Callable[[dict], None] | None = None):
+        self.model = model
+        self.scale = scale
+        self.snapshots = set(snapshots)
+        self.progress = progress
+        self.kept: dict[int, np.ndarray] = {}
+        self.report = SkipReport()
+        self.voxels = model.geometry.voxels_per_band
+        self.paper_voxels = centred_geometry(model.sensor_shape).voxels_per_band
+        self.full_transforms = 4 * model.n_bands        # the full solver's gradient step
+
+    def on(self, problem: Problem):
+        """FISTA's on_iteration callback for iterations in ``problem``'s space: adds the rank and transforms to
+        the record (its numbers stay in solver units: FISTA's rules compare them); progress gets data units."""
+        def on_iteration(record: dict, x):
+            evaluated = math.isfinite(record["objective"])
+            transforms = problem.transforms() * (3 if evaluated else 2) // 2     # + a forward for F(x)
+            record["rank"] = problem.rank
+            record["transforms"] = transforms
+            self.count(transforms, self.full_transforms * (3 if evaluated else 2) // 2)
+            if record["iteration"] in self.snapshots:
+                self.kept[record["iteration"]] = (self.model.window(problem.solution(x)) * self.scale).astype(np.float32)
+            if self.progress is not None:
+                self.progress(in_data_units(record, self.scale))
+        return on_iteration
+
+    def count(self, transforms: int, full_transforms: int = 0):
+        """Add FFT work done (at this field) and the full solver's (at the paper's field)."""
+        self.report.done_work += transforms * self.voxels
+        self.report.full_work += full_transforms * self.paper_voxels

@@ -1,0 +1,52 @@
+"""The noise level from a residual, and ``--tv auto`` choosing its weight from it."""
+import numpy as np
+import pytest
+
+from clsdcam.errors import InputError
+from clsdcam.noise import residual_noise
+from clsdcam.priors import AUTO, TotalVariation
+from clsdcam.settings import Settings
+from clsdcam.sim import simulate
+from clsdcam.solver import reconstruct
+
+
+def test_residual_noise_reads_white_noise_under_a_smooth_signal():
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[0:200, 0:300]
+    smooth = np.sin(x / 400.0) + np.cos(y / 250.0)
+    for sigma in (0.01, 0.1):
+        assert residual_noise(smooth + rng.normal(0.0, sigma, smooth.shape)) == pytest.approx(sigma, rel=0.05)
+
+
+def test_auto_weight_is_proportional_to_the_noise_within_its_bounds():
+    rule = TotalVariation.auto_weight
+    assert rule.for_noise(0.005) == pytest.approx(rule.per_noise * 0.005)
+    assert rule.for_noise(1.0) == rule.highest and rule.for_noise(0.0) == rule.lowest
+
+
+def test_only_priors_with_a_rule_take_auto():
+    assert Settings().tv == AUTO and Settings(tv=AUTO).tv == AUTO
+    with pytest.raises(InputError, match="--l1 auto"):
+        Settings(l1=AUTO)
+    with pytest.raises(InputError, match="or auto"):
+        Settings(tv="sometimes")
+
+
+def test_tv_auto_follows_the_measurements_noise():
+    """The same scene with 30× the read noise gets a larger TV weight; the choice and the noise estimate are
+    recorded, and said in the skip report."""
+    quiet = simulate(scene="leds", shape=(48, 64), n_bands=8, seed=1, noise_var=1e-7, photons=None)
+    loud = simulate(scene="leds", shape=(48, 64), n_bands=8, seed=1, noise_var=1e-4, photons=None)
+    chosen = []
+    for sim in (quiet, loud):
+        result = reconstruct(sim.measurement, sim.calibration, iters=40)
+        assert result.attrs["tv"] == AUTO and "tv: auto" in result.attrs["skips"]
+        chosen.append((result.attrs["tv_chosen"], result.attrs["noise_estimate"]))
+    (tau_quiet, noise_quiet), (tau_loud, noise_loud) = chosen
+    assert noise_loud > 2 * noise_quiet and tau_loud > 2 * tau_quiet
+
+
+def test_a_fixed_weight_is_kept():
+    sim = simulate(scene="leds", shape=(32, 48), n_bands=4, seed=2)
+    result = reconstruct(sim.measurement, sim.calibration, iters=40, tv=2e-3)
+    assert result.attrs["tv_chosen"] == pytest.approx(2e-3) and "noise_estimate" not in result.attrs
