@@ -6,7 +6,7 @@
 
 Nothing heavy is imported here: the names below load their modules on first use.
 """
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 _LAZY = {
     "Calibration": "clsdcam.calibration",

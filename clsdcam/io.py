@@ -39,6 +39,24 @@ def atomic_output(path):
         raise
 
 
+def check_output(path, what: str = "output") -> Path:
+    """``path`` as a Path, after checking, before any work, that a file can be written there: not an
+    existing directory, its folder creatable and writable (a probe file is made and removed); InputError
+    (one line) otherwise."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{what} {path}: is a directory (give a file name)")
+    folder = path.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".{path.name}.{secrets.token_hex(4)}.probe"
+        probe.touch()
+        probe.unlink()
+    except OSError as exc:
+        raise InputError(f"{what} {path}: cannot write there ({exc.strerror or exc})") from None
+    return path
+
+
 # ---- reading helpers ----------------------------------------------------------------------
 def existing_file(path, what: str) -> Path:
     """``path`` as a Path, or InputError if it is missing, a directory or empty."""
@@ -165,14 +183,15 @@ def save_measurement(path, frame: np.ndarray) -> Path:
 
 # ---- cubes --------------------------------------------------------------------------------
 def write_cube(path, cube, wavelengths, history=(), attrs=None, full_field=None) -> Path:
-    """OUT.h5: ``cube`` (K,H,W) float32, ``wavelengths`` (K,), group ``history`` (one dataset per
-    record key, one entry per iteration), attributes ``attrs``; optional ``full_field``."""
+    """OUT.h5: ``cube`` (K,H,W) float32 with HDF5 dimension scales ``wavelength`` (K,) in nm, ``y`` and ``x``
+    (pixel indices), so netCDF readers (xarray's h5netcdf engine) see dims (wavelength, y, x) with
+    coordinates; group ``history`` (one dataset per record key, one entry per
+    iteration), attributes ``attrs``; optional ``full_field``."""
     import h5py
 
     path = Path(path)
     with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
-        f["cube"] = np.asarray(cube, np.float32)
-        f["wavelengths"] = np.asarray(wavelengths, np.float64)
+        write_scaled(f, "cube", np.asarray(cube, np.float32), wavelengths)
         if full_field is not None:
             f["full_field"] = np.asarray(full_field, np.float32)
         group = f.create_group("history")
@@ -183,6 +202,21 @@ def write_cube(path, cube, wavelengths, history=(), attrs=None, full_field=None)
     return path
 
 
+def write_scaled(f, name: str, data: np.ndarray, wavelengths):
+    """Dataset ``name`` (…, K, H, W) with dimension scales on its last three axes: ``wavelength`` (nm), ``y``,
+    ``x``; leading axes (frames) get a ``frame`` scale."""
+    cube = f.create_dataset(name, data=data)
+    f["wavelength"] = np.asarray(wavelengths, np.float64)
+    f["wavelength"].attrs.update(units="nm", long_name="band centre wavelength")
+    axes = ["frame"] * (data.ndim - 3) + ["wavelength", "y", "x"]
+    for axis, label in enumerate(axes):
+        if label not in f:
+            f[label] = np.arange(data.shape[axis], dtype=np.int64)
+        f[label].make_scale(label)
+        cube.dims[axis].attach_scale(f[label])
+    return cube
+
+
 def _attribute(value):
     """HDF5-storable form of a setting: None → "", tuples → arrays, the rest as is."""
     if value is None:
@@ -190,6 +224,15 @@ def _attribute(value):
     if isinstance(value, (tuple, list)):
         return np.asarray(value)
     return value
+
+
+def read_wavelengths(f, n_bands: int) -> np.ndarray:
+    """A file's band wavelengths: ``wavelength`` (cubes written since 0.2), ``wavelengths`` (calibrations, truth
+    files, earlier cubes), else 0 … K−1."""
+    for key in ("wavelength", "wavelengths"):
+        if key in f:
+            return f[key][...]
+    return np.arange(n_bands, dtype=float)
 
 
 def read_cube(path) -> dict:
@@ -202,7 +245,7 @@ def read_cube(path) -> dict:
     if cube.ndim != 3:
         raise InputError(f"cube {path}: expected (K, H, W), found shape {cube.shape}")
     with h5py.File(path, "r") as f:
-        wavelengths = f["wavelengths"][...] if "wavelengths" in f else np.arange(cube.shape[0], dtype=float)
+        wavelengths = read_wavelengths(f, cube.shape[0])
         history = {k: v[...] for k, v in f["history"].items()} if "history" in f else {}
         attrs = dict(f.attrs)
     return {"cube": cube, "wavelengths": wavelengths, "history": history, "attrs": attrs}

@@ -32,7 +32,7 @@ def test_reconstruct_writes_cube_history_attrs_and_pictures(simulated, tmp_path,
     assert "PSNR" in printed and "spectral angle" in printed
     with h5py.File(output, "r") as f:
         assert f["cube"].shape == (4, 32, 40) and f["cube"].dtype == np.float32
-        assert f["wavelengths"].shape == (4,)
+        assert f["wavelength"].shape == (4,) and f["wavelength"].attrs["units"] == "nm"
         assert len(f["history/objective"]) == 15 and len(f["history/seconds"]) == 15
         assert f.attrs["iterations"] == 15 and f.attrs["backend"] == "numpy"
         assert f.attrs["stop_reason"] == "iterations"
