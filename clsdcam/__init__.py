@@ -1,8 +1,8 @@
 """clsdcam: Spectral DiffuserCam hyperspectral reconstruction on NumPy or any OpenCL device.
 
-    from clsdcam import Calibration, reconstruct
-    cal = Calibration.load("calibration.mat")
-    result = reconstruct(measurement, cal, backend="opencl", iters=500)
+    import clsdcam
+    result = clsdcam.reconstruct("measurement.png", "calibration.mat", iters=300)
+    result.cube, result.wavelengths, result.save("cube.h5")
 
 Nothing heavy is imported here: the names below load their modules on first use.
 """
@@ -11,11 +11,13 @@ __version__ = "0.2.0"
 _LAZY = {
     "Calibration": "clsdcam.calibration",
     "Preprocessing": "clsdcam.calibration",
+    "prepare": "clsdcam.calibration",
     "reconstruct": "clsdcam.solver",
     "Solver": "clsdcam.solver",
     "Settings": "clsdcam.settings",
     "Result": "clsdcam.solver",
     "InputError": "clsdcam.errors",
+    "load_measurement": "clsdcam.io",
 }
 
 __all__ = ["__version__", *_LAZY]

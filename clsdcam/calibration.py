@@ -27,12 +27,18 @@ DEFECT_HALF = 2                        # the reference zeroes [i−2:i+2, j−2:
 
 @dataclass
 class Calibration:
-    """psf (H,W), filters (K,H,W), wavelengths (K,) in nm, and where they came from."""
+    """psf (H,W), filters (K,H,W), wavelengths (K,) in nm, and where they came from.
+
+    ``scale``: the factor the model A was divided by when the PSF and filters were normalised
+    (:func:`preprocess`); a cube solved on this calibration, divided by it, is in the units of the
+    calibration as it was measured (normalising conditions the solve, it does not change the units).
+    """
 
     psf: np.ndarray
     filters: np.ndarray
     wavelengths: np.ndarray
     source: str = "memory"
+    scale: float = 1.0
 
     def __post_init__(self):
         self.psf = require_finite(as_real_array(self.psf, f"{self.source}: psf"), f"{self.source}: psf")
@@ -68,7 +74,7 @@ class Calibration:
         """Read the paper's ``calibration.mat`` (v5 or v7.3) or our HDF5 layout."""
         path = existing_file(path, "calibration")
         arrays = _read_mat_v5(path) if _is_mat_v5(path) else _read_hdf5_calibration(path)
-        return cls(*arrays, source=str(path))
+        return cls(*arrays[:3], source=str(path), scale=arrays[3] if len(arrays) > 3 else 1.0)
 
     def save(self, path) -> Path:
         """Write our HDF5 layout atomically."""
@@ -80,6 +86,7 @@ class Calibration:
             f["filters"] = self.filters.astype(np.float32)
             f["wavelengths"] = self.wavelengths.astype(np.float64)
             f.attrs["source"] = self.source
+            f.attrs["units_scale"] = self.scale
         return path
 
 
@@ -109,7 +116,8 @@ def _read_hdf5_calibration(path: Path):
     try:
         with h5py.File(path, "r") as f:
             if "filters" in f:
-                return tuple(read_dataset(f, key, f"calibration {path}") for key in ("psf", "filters", "wavelengths"))
+                return (*(read_dataset(f, key, f"calibration {path}") for key in ("psf", "filters", "wavelengths")),
+                        float(f.attrs.get("units_scale", 1.0)))
             contents = {key: read_dataset(f, key, f"calibration {path}").T for key in ("psf", "mask", "wavs") if key in f}
             contents["__keys__"] = list(f.keys())
     except (OSError, ValueError, TypeError, KeyError, RuntimeError, MemoryError) as exc:
@@ -205,12 +213,28 @@ def preprocess(calibration: Calibration, measurement: np.ndarray, options: Prepr
     if options.zero_defect:
         filters, b = zero_defect_block(filters, b)
     filters, b = exclude_pixels(filters, b, excluded_pixels(b, options))
+    scale = calibration.scale
     if options.normalize_psf:
+        scale *= np.linalg.norm(psf)
         psf = psf / np.linalg.norm(psf)
     if options.normalize_filters:
+        scale *= np.max(filters)
         filters = filters / np.max(filters)
-    out = replace(calibration, psf=psf, filters=filters, wavelengths=wavelengths)
+    out = replace(calibration, psf=psf, filters=filters, wavelengths=wavelengths, scale=float(scale))
     return out, b
+
+
+def prepare(measurement, calibration, options: "Preprocessing | None" = None):
+    """(calibration, measurement) ready to solve, the same way for the API and the command line: either given
+    as a file path (loaded) or as an object/array, then :func:`preprocess` with ``options`` (default:
+    :class:`Preprocessing` ()). The calibration's ``scale`` brings solved cubes back to its units."""
+    from .io import load_measurement
+
+    if not isinstance(calibration, Calibration):
+        calibration = Calibration.load(calibration)
+    if isinstance(measurement, (str, Path)):
+        measurement = load_measurement(measurement)
+    return preprocess(calibration, measurement, options or Preprocessing())
 
 
 def _crop_window(crop, calibration: Calibration, b: np.ndarray) -> tuple[slice, slice]:

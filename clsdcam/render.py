@@ -209,6 +209,28 @@ def spectra_figure(cube, wavelengths, image, points, truth=None):
     return fig
 
 
+def profiles_figure(image, grey, point, truth=None):
+    """A one-band cube (a plain DiffuserCam): the grey ``image`` (H, W) with the row and column through
+    ``point`` = (y, x) marked, and the intensity along both (the truth's dashed)."""
+    y, x = point
+    fig = _figure(figsize=(12, 4.8))
+    ax_img, ax_prof = fig.subplots(1, 2, width_ratios=(1, 1.6))
+    ax_img.imshow(grey, cmap="gray", interpolation="nearest")
+    ax_img.axhline(y, color="tab:red", lw=1)
+    ax_img.axvline(x, color="tab:blue", lw=1)
+    ax_img.set(title="image", xlabel="x (px)", ylabel="y (px)")
+    for profile, reference, colour, label in ((image[y], None if truth is None else truth[y], "tab:red", f"row y={y}"),
+                                              (image[:, x], None if truth is None else truth[:, x], "tab:blue",
+                                               f"column x={x}")):
+        ax_prof.plot(profile, color=colour, label=label)
+        if reference is not None:
+            ax_prof.plot(reference, "--", color=colour, label=f"{label}: truth")
+    ax_prof.set(title="line profiles", xlabel="position (px)", ylabel="intensity")
+    ax_prof.grid(alpha=0.3)
+    ax_prof.legend(fontsize="small")
+    return fig
+
+
 def convergence_figure(history):
     """Objective and data term against iteration on a log axis; non-finite and non-positive
     values (e.g. the objective on iterations where it was not evaluated) are left out."""
@@ -237,7 +259,9 @@ def convergence_figure(history):
 
 def save_pictures(prefix, cube, wavelengths, history=None, points=None, truth=None) -> list[Path]:
     """Write ``{prefix}_falsecolour.png``, ``_projections.png``, ``_spectra.png`` and, when
-    ``history`` is a non-empty list, ``_convergence.png``; return their paths.
+    ``history`` is a non-empty list, ``_convergence.png``; return their paths. A one-band cube (a plain
+    DiffuserCam) gets ``_image.png`` (grey) and ``_profiles.png`` (row and column through its first point)
+    instead of the colour, projection and spectrum pictures.
 
     ``points`` are (y, x) pixels for the spectra (default: up to 4 brightest pixels of the band sum,
     at least H // 8 apart); ``truth`` is a cube of the same shape drawn dashed. Bands are sorted
@@ -249,8 +273,14 @@ def save_pictures(prefix, cube, wavelengths, history=None, points=None, truth=No
     truth = None if truth is None else truth[order]
     image = false_colour(cube, wavelengths)
     points = brightest_points(cube.sum(axis=0)) if points is None else points
-    figures = {"projections": projections_figure(cube, wavelengths, image),
-               "spectra": spectra_figure(cube, wavelengths, image, points, truth)}
+    if cube.shape[0] == 1:
+        first = "image"
+        figures = {"profiles": profiles_figure(cube[0], image[..., 0], points[0] if points else (0, 0),
+                                               None if truth is None else truth[0])}
+    else:
+        first = "falsecolour"
+        figures = {"projections": projections_figure(cube, wavelengths, image),
+                   "spectra": spectra_figure(cube, wavelengths, image, points, truth)}
     if history:
         figures["convergence"] = convergence_figure(list(history))
 
@@ -258,7 +288,7 @@ def save_pictures(prefix, cube, wavelengths, history=None, points=None, truth=No
 
     prefix = Path(prefix)
     prefix.parent.mkdir(parents=True, exist_ok=True)
-    paths = [prefix.with_name(f"{prefix.name}_{name}.png") for name in ("falsecolour", *figures)]
+    paths = [prefix.with_name(f"{prefix.name}_{name}.png") for name in (first, *figures)]
     with atomic_output(paths[0]) as tmp:
         matplotlib.image.imsave(tmp, image, format="png")
     return [paths[0], *(_save(fig, path) for fig, path in zip(figures.values(), paths[1:]))]

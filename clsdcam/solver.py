@@ -106,8 +106,15 @@ class Solver:
         tracker.report.lines += [line for line in (phases.refreshes_line(),) if line]
         out = self._result(problem.solution(loop.x), scale, loop.history, reason, priors, loop.step, tracker)
         out.attrs.update({f"{p.name}_chosen": p.relative for p in priors}, **phases.chosen)
+        out.attrs["relative_residual"] = self._relative_residual(problem, loop.x)
         out.snapshots = tracker.kept
         return out
+
+    def _relative_residual(self, problem: Problem, x) -> float:
+        """‖Av − b‖/‖b‖ of the final iterate: how much of the measurement the cube leaves unexplained (noise,
+        or a calibration that does not match the measurement when it stays high)."""
+        data, norm = problem.data(x), self.backend.vdot(self.b, self.b)
+        return float(np.sqrt(2.0 * data / norm)) if norm > 0 else 0.0
 
     def band_problem(self, priors: list) -> Problem:
         """The problem on the band cube (the full problem)."""
@@ -128,7 +135,7 @@ class Solver:
         """The first iterate: zero, a (K, H, W) sensor-window cube (zero around it), or a whole field."""
         if x0 is None:
             return self.model.embed(np.zeros(self._cube_window_shape()))
-        x0 = np.asarray(x0) / scale
+        x0 = np.asarray(x0) * self.calibration.scale / scale
         if x0.shape == self.model.cube_shape:
             return self.backend.to_device(x0)
         if x0.shape != self._cube_window_shape():
@@ -147,9 +154,9 @@ class Solver:
 
     def _result(self, x, scale, history, reason, priors: list | None = None, step: float = 0.0,
                 tracker: Tracker | None = None) -> Result:
-        model = self.model
-        cube = (model.window(x) * scale).astype(np.float32)
-        full = (self.backend.to_host(x) * scale).astype(np.float32) if self.settings.full_field else None
+        model, units = self.model, scale / self.calibration.scale      # solver units -> the calibration's units
+        cube = (model.window(x) * units).astype(np.float32)
+        full = (self.backend.to_host(x) * units).astype(np.float32) if self.settings.full_field else None
         history = [in_data_units(record, scale) for record in history]
         attrs = {
             **{k: v for k, v in asdict(self.settings).items()},
@@ -171,6 +178,7 @@ class Solver:
             "final_rank": history[-1]["rank"] if history else model.n_bands,
             "clsdcam_version": __version__,
             "calibration": self.calibration.source,
+            "calibration_scale": self.calibration.scale,
         }
         return Result(cube=cube, wavelengths=np.asarray(self.calibration.wavelengths), history=history,
                       attrs=attrs, full_field=full)
@@ -205,7 +213,13 @@ class DataReferences:
 
 def reconstruct(measurement, calibration, backend="numpy", device: str | None = None, x0=None,
                 progress: Callable[[dict], None] | None = None, fft: str = "auto", path: str = "auto",
-                **settings) -> Result:
-    """Reconstruct a cube from one measurement; ``settings`` are the fields of ``Settings``."""
+                preprocessing=None, **settings) -> Result:
+    """Reconstruct a cube from one measurement (an array or an image/.npy/.h5 path) with a calibration (a
+    :class:`~clsdcam.calibration.Calibration` or a file path), preprocessed as the command line does
+    (``preprocessing``: a :class:`~clsdcam.calibration.Preprocessing`, default its defaults); the cube comes
+    back in the calibration's units. ``settings`` are the fields of ``Settings``."""
+    from .calibration import prepare
+
+    calibration, measurement = prepare(measurement, calibration, preprocessing)
     solver = Solver(calibration, backend=backend, device=device, settings=Settings(**settings), fft=fft, path=path)
     return solver.solve(measurement, x0=x0, progress=progress)

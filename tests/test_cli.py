@@ -128,3 +128,108 @@ def test_devices_lists_the_opencl_devices(capsys):
     pytest.importorskip("pyopencl")
     assert main(["devices"]) == 0
     assert "fp64" in capsys.readouterr().out
+
+
+def every_help_command() -> list[list[str]]:
+    """Every command and sub-choice, as the argument list that asks for its help."""
+    from clsdcam.cli.analyze import ANALYSES
+    from clsdcam.cli.options import commands
+
+    return [[]] + [[c] for c in commands()] + [["analyze", a] for a in ANALYSES + ("all",)]
+
+
+@pytest.mark.parametrize("command", every_help_command(), ids=lambda c: " ".join(c) or "clsdcam")
+def test_every_help_works_and_shows_examples(command, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main([*command, "--help"])
+    assert exit_.value.code == 0
+    text = capsys.readouterr().out
+    assert "usage: clsdcam" in text
+    if len(command) == 1:
+        assert "examples:" in text
+    if len(command) == 1 and command[0] not in ("devices", "analyze") or len(command) == 2:
+        assert "default" in text
+
+
+def test_batch_help_lists_only_what_batch_takes(capsys):
+    with pytest.raises(SystemExit):
+        main(["batch", "--help"])
+    text = capsys.readouterr().out
+    assert not any(flag in text for flag in ("--png", "--full-field", "--saturation"))
+
+
+def test_a_bad_number_names_the_option_not_an_internal_type(simulated, tmp_path, capsys):
+    assert run_reconstruct(simulated, tmp_path / "o.h5", "--tv", "abc") == 2
+    err = capsys.readouterr().err
+    assert "--tv" in err and "'abc' is not a number" in err and "_number" not in err
+
+
+def test_bare_command_lists_the_commands(capsys):
+    assert main([]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "reconstruct" in err and "demo" in err and "\n" not in err
+
+
+def test_version_and_python_m(tmp_path):
+    import clsdcam
+
+    out = subprocess.run([sys.executable, "-m", "clsdcam", "--version"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout.strip() == f"clsdcam {clsdcam.__version__}"
+
+
+def test_scene_names_are_the_simulators():
+    from clsdcam.cli.options import SCENES
+    from clsdcam.sim import SCENES as SIMULATED
+
+    assert set(SCENES) == set(SIMULATED)
+
+
+@pytest.mark.parametrize("where", ["directory", "unwritable", "pictures"])
+def test_an_unusable_output_is_refused_before_any_work(simulated, tmp_path, capsys, monkeypatch, where):
+    """-o naming a directory or an unwritable place, or an unwritable picture prefix: exit 2 with one line
+    before the solve starts (it used to fail after the whole solve, with a traceback)."""
+    import clsdcam.solver
+
+    monkeypatch.setattr(clsdcam.solver.Solver, "solve", lambda *a, **k: pytest.fail("solved before the check"))
+    output = {"directory": tmp_path, "unwritable": "/proc/nope/cube.h5", "pictures": tmp_path / "ok.h5"}[where]
+    extra = ["--png", "/proc/nope/pic"] if where == "pictures" else []
+    assert run_reconstruct(simulated, output, *extra) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("clsdcam: error:") and "\n" not in err and not (tmp_path / "ok.h5").exists()
+
+
+def test_a_closed_pipe_does_not_stop_the_work_or_print_a_traceback(tmp_path):
+    """``clsdcam … | head`` with the reader gone before the output: no BrokenPipeError traceback, the files
+    are written and the exit code is 0."""
+    process = subprocess.Popen([sys.executable, "-m", "clsdcam", "simulate", str(tmp_path / "s"), "--size", "24x32",
+                                "--bands", "3"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process.stdout.close()
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 0 and b"Traceback" not in err and b"BrokenPipe" not in err
+    assert (tmp_path / "s" / "measurement.npy").exists()
+
+
+def test_progress_in_a_log_is_lines_not_a_redrawn_bar(tmp_path):
+    """stderr not a terminal: progress lines (every LOG_EVERY seconds, and one at the end), no carriage returns."""
+    assert main(["simulate", str(tmp_path / "s"), "--size", "24x32", "--bands", "3", "--scene", "leds"]) == 0
+    process = subprocess.run([sys.executable, "-m", "clsdcam", "reconstruct", str(tmp_path / "s" / "measurement.npy"),
+                              "--calibration", str(tmp_path / "s" / "calibration.h5"), "-o", str(tmp_path / "c.h5"),
+                              "--iters", "12"], capture_output=True, text=True, timeout=120)
+    assert process.returncode == 0 and "\r" not in process.stderr
+    lines = [line for line in process.stderr.splitlines() if line.startswith("clsdcam: iteration")]
+    assert lines and lines[-1].startswith("clsdcam: iteration 12/12")
+
+
+def test_a_calibration_that_does_not_fit_is_reported(simulated, tmp_path, capsys):
+    """Every reconstruction reports ‖Av − b‖/‖b‖ (stored); a calibration of the right size but another camera's
+    runs to completion but warns in one line."""
+    assert main(["simulate", str(tmp_path / "other"), *SMALL, "--scene", "leds", "--seed", "9"]) == 0
+    assert run_reconstruct(simulated, tmp_path / "right.h5", "--iters", "60") == 0
+    right = capsys.readouterr()
+    assert "fit: ‖Av − b‖/‖b‖" in right.out and "warning" not in right.err
+    assert main(["reconstruct", str(simulated / "measurement.npy"), "--calibration", str(tmp_path / "other" / "calibration.h5"),
+                 "-o", str(tmp_path / "wrong.h5"), "--quiet", "--iters", "60"]) == 0
+    wrong = capsys.readouterr()
+    assert "warning: the cube leaves" in wrong.err and wrong.err.count("\n") == 1
+    with h5py.File(tmp_path / "right.h5", "r") as r, h5py.File(tmp_path / "wrong.h5", "r") as w:
+        assert r.attrs["relative_residual"] < 0.1 < w.attrs["relative_residual"]   # measured: 0.054 and 0.72

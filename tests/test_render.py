@@ -121,8 +121,13 @@ def test_save_pictures_without_history(tmp_path):
 
 
 def test_save_pictures_single_band(tmp_path):
-    paths = save_pictures(tmp_path / "one", small_cube(shape=(1, 5, 6)), [532.0], history=HISTORY[:1])
-    assert len(paths) == 4 and all(p.stat().st_size > 0 for p in paths)
+    """A plain DiffuserCam (K = 1) gets a grey image, its line profiles and the convergence plot, not a fake
+    wavelength axis and a one-dot "spectrum"."""
+    cube = small_cube(shape=(1, 5, 6))
+    paths = save_pictures(tmp_path / "one", cube, [532.0], history=HISTORY[:1], truth=cube * 0.9)
+    assert [p.name for p in paths] == ["one_image.png", "one_profiles.png", "one_convergence.png"]
+    grey = read_png(paths[0])
+    assert np.allclose(grey[..., 0], grey[..., 1]) and np.allclose(grey[..., 1], grey[..., 2])
 
 
 @pytest.mark.parametrize("kwargs, message", [

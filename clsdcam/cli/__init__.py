@@ -6,19 +6,62 @@ Exit codes: 0 success, 2 bad input (one line on stderr, no traceback, no output 
 """
 from __future__ import annotations
 
+import os
 import sys
 
 from ..errors import InputError
 
 
+class PipeGuard:
+    """stdout that keeps going when the reader of a pipe has left (``clsdcam … | head``): the rest of the
+    output goes to the null device instead of a BrokenPipeError traceback, and the command finishes its work."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self.stream.write(text)
+        except BrokenPipeError:
+            self._to_null()
+            return len(text)
+
+    def flush(self):
+        try:
+            self.stream.flush()
+        except BrokenPipeError:
+            self._to_null()
+
+    def _to_null(self):
+        """Point the stream (and its file descriptor, which Python flushes at exit) at the null device."""
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(null, self.stream.fileno())
+        except (OSError, ValueError, AttributeError):      # no file descriptor (e.g. captured): a new stream
+            self.stream = os.fdopen(null, "w", encoding="utf-8")
+        else:
+            os.close(null)
+
+    def __getattr__(self, name):
+        return getattr(self.stream, name)
+
+
 def main(argv=None) -> int:
-    from .options import COMMANDS, build_parser, command_module
+    stdout, sys.stdout = sys.stdout, PipeGuard(sys.stdout)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout = stdout
+
+
+def _main(argv) -> int:
+    from .options import build_parser, command_module, commands
 
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
         if args.command is None:
-            raise InputError("a command is needed: " + ", ".join(COMMANDS) + " (clsdcam --help says what each does)")
+            raise InputError("a command is needed: " + ", ".join(commands()) + " (clsdcam --help says what each does)")
         return command_module(args.command).run(args)
     except InputError as exc:
         print(f"clsdcam: error: {exc}", file=sys.stderr)

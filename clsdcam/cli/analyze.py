@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from ..prototype import N_BANDS, SENSOR_SHAPE
-from .options import integer_at_least, size
+from .options import examples, integer_at_least, size
 
 ANALYSES = ("resolution", "condition", "designs", "spectral", "twopoint")
 HELP = {"resolution": "PSF autocorrelation half-width at 70 %% (simulated and measured PSFs)",
@@ -34,8 +34,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                          help="iterations per reconstruction (default 200)")
     options.add_argument("--trials", type=integer_at_least(1), default=5,
                          help="random placements per condition number (default 5)")
-    options.add_argument("--seed", type=int, default=0)
-    parser = subparsers.add_parser("analyze", help="the paper's resolution analyses (JSON + PNG per analysis)")
+    options.add_argument("--seed", type=int, default=0, help="seed of every random choice")
+    parser = subparsers.add_parser("analyze", help="the paper's resolution analyses (JSON + PNG per analysis)",
+                                   epilog=examples("clsdcam analyze all analysis/",
+                                                   "clsdcam analyze resolution out/ --size 320x448",
+                                                   "clsdcam analyze spectral out/ --recon-size 64x96 --iters 200"))
     which = parser.add_subparsers(dest="what", required=True, metavar="{" + ",".join(ANALYSES + ("all",)) + "}")
     for name in ANALYSES + ("all",):
         which.add_parser(name, parents=[options], help=HELP[name], description=HELP[name])

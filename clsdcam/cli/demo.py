@@ -5,13 +5,15 @@ import time
 from pathlib import Path
 
 from ..errors import shape_text
-from .options import add_simulation_options, add_solver_options, iterations
+from .options import add_simulation_options, add_solver_options, examples, iterations
 from .simulate import simulation_kwargs
 from .solve import print_accuracy, solve, write
 
 
 def add_parser(subparsers):
-    p = subparsers.add_parser("demo", help="simulate the default scene, reconstruct it, report accuracy and time")
+    p = subparsers.add_parser("demo", help="simulate the default scene, reconstruct it, report accuracy and time",
+                              epilog=examples("clsdcam demo", "clsdcam demo out/ --iters 500 --report-at 100,300",
+                                              "clsdcam demo small/ --size 64x96 --bands 16 --backend opencl"))
     p.add_argument("outdir", nargs="?", default="clsdcam-demo")
     p.add_argument("--report-at", type=iterations, default=(), metavar="N,N,...",
                    help="also print the accuracy after these iterations, e.g. 100,500")
@@ -20,8 +22,10 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
+    from ..io import check_output
     from ..sim import simulate, write_simulation
 
+    check_output(Path(args.outdir) / "cube.h5", "demo folder")
     start = time.perf_counter()
     sim = simulate(**simulation_kwargs(args))
     write_simulation(args.outdir, sim)

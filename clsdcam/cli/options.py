@@ -1,4 +1,5 @@
-"""The command line's parser: argument types, the option groups commands share, and ``build_parser``.
+"""The command line's parser: argument types, the option groups commands share, and ``build_parser``
+(one sub-command per module of :mod:`clsdcam.cli` but the helpers: a new command is a new module).
 
 Building the parser imports only this package's command modules, ``clsdcam.settings`` (with the prior
 table that generates one ``--flag`` per prior) and ``clsdcam.prototype``: every heavy import (SciPy, h5py,
@@ -13,14 +14,36 @@ import importlib
 from .. import __version__
 from ..errors import InputError
 
-COMMANDS = ("reconstruct", "batch", "simulate", "demo", "analyze", "devices")
+ORDER = ("reconstruct", "batch", "calibrate", "simulate", "demo", "export", "show", "analyze", "check", "devices")
+HELPERS = ("options", "solve")       # modules of this package that are not commands
+SCENES = ("target", "leds", "lines", "piecewise", "points", "sources", "realcube")   # clsdcam.sim.SCENES (tested)
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Epilogs kept as written (worked examples); every option's default shown unless its help says it."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "default" in text.lower() or any(action.default is v for v in (None, False, argparse.SUPPRESS)) \
+                or not action.option_strings:
+            return text
+        return text + " (default: %(default)s)"
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse that reports a usage error as an InputError (one line, exit 2)."""
+    """argparse that reports a usage error as an InputError (one line, exit 2) and shows defaults and examples."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         raise InputError(message)
+
+
+def examples(*lines: str) -> str:
+    """An epilog of worked examples, one command per line."""
+    return "examples:\n" + "\n".join(f"  {line}" for line in lines)
 
 
 # ---- argument types (argparse names the option in its one-line error) -----------------------------------
@@ -132,8 +155,9 @@ def add_preprocessing_options(p: argparse.ArgumentParser):
 def add_simulation_options(p: argparse.ArgumentParser):
     from ..prototype import N_BANDS, SENSOR_SHAPE
 
-    p.add_argument("--scene", default="target", help="target, leds, piecewise, points or realcube (default target)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--scene", default="target", choices=SCENES, metavar="SCENE",
+                   help=f"{', '.join(SCENES)} (default target)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
     p.add_argument("--noise", type=number, default=None, help="Gaussian noise variance relative to max(b)²")
     p.add_argument("--size", type=size(), default=SENSOR_SHAPE, metavar="HxW",
                    help=f"sensor size (default {SENSOR_SHAPE[0]}x{SENSOR_SHAPE[1]})")
@@ -147,9 +171,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"clsdcam {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser,
                                 title="commands (clsdcam COMMAND --help for each)")
-    for name in COMMANDS:
+    for name in commands():
         command_module(name).add_parser(sub)
     return parser
+
+
+def commands() -> list[str]:
+    """The command modules of this package (each with ``add_parser`` and ``run``), in ORDER, then any other."""
+    import pkgutil
+
+    found = {m.name for m in pkgutil.iter_modules(importlib.import_module(__package__).__path__)
+             if not m.name.startswith("_") and m.name not in HELPERS}
+    return [n for n in ORDER if n in found] + sorted(found - set(ORDER))
 
 
 def command_module(name: str):

@@ -2,12 +2,15 @@
 from __future__ import annotations
 
 from ..errors import InputError, shape_text
-from .options import add_preprocessing_options, add_solver_options, number, preprocessing_from
+from .options import add_preprocessing_options, add_solver_options, examples, number, preprocessing_from
 from .solve import print_accuracy, solve, write
 
 
 def add_parser(subparsers):
-    p = subparsers.add_parser("reconstruct", help="reconstruct a cube from one measurement")
+    p = subparsers.add_parser("reconstruct", help="reconstruct a cube from one measurement", epilog=examples(
+        "clsdcam reconstruct sim/measurement.npy --calibration sim/calibration.h5 -o cube.h5 --png cube",
+        "clsdcam reconstruct raw.png --calibration calibration.mat --reference-preprocess -o cube.h5",
+        "clsdcam reconstruct hand.tif --calibration psf.h5 -o hand.h5 --iters 500 --backend opencl"))
     p.add_argument("measurement", help="PNG/TIFF (8/16-bit), .npy or .h5 (dataset 'measurement')")
     p.add_argument("--calibration", required=True, help="calibration.mat (psf, mask, wavs) or our .h5")
     p.add_argument("-o", "--output", required=True, help="output cube, HDF5")
@@ -21,12 +24,13 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
-    from ..calibration import Calibration, preprocess
-    from ..io import load_measurement, read_cube
+    from ..calibration import prepare
+    from ..io import check_output, read_cube
 
-    calibration = Calibration.load(args.calibration)
-    measurement = load_measurement(args.measurement)
-    calibration, measurement = preprocess(calibration, measurement, preprocessing_from(args))
+    check_output(args.output)
+    if args.png:
+        check_output(f"{args.png}_falsecolour.png", "--png")
+    calibration, measurement = prepare(args.measurement, args.calibration, preprocessing_from(args))
     truth = read_cube(args.truth)["cube"] if args.truth else None
     expected = (calibration.n_bands,) + measurement.shape
     if truth is not None and truth.shape != expected:

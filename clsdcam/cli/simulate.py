@@ -2,11 +2,14 @@
 from __future__ import annotations
 
 from ..errors import InputError, shape_text
-from .options import add_simulation_options, positive_int
+from .options import add_simulation_options, examples, positive_int
 
 
 def add_parser(subparsers):
-    p = subparsers.add_parser("simulate", help="simulate a camera, a scene and its measurement")
+    p = subparsers.add_parser("simulate", help="simulate a camera, a scene and its measurement", epilog=examples(
+        "clsdcam simulate sim/ --scene target",
+        "clsdcam simulate small/ --scene leds --size 64x96 --bands 16 --noise 1e-4",
+        "clsdcam simulate video/ --scene leds --frames 16"))
     p.add_argument("outdir")
     p.add_argument("--frames", type=positive_int, default=None,
                    help="write a video of N frames of the scene drifting (frames.npy, truth.h5)")

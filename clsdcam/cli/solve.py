@@ -3,6 +3,7 @@ the report and the accuracy printed (shared by ``reconstruct`` and ``demo``)."""
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 from ..errors import InputError, shape_text
@@ -43,27 +44,48 @@ def write(args, result, truth=None) -> int:
     return 0
 
 
+LOG_EVERY = 10.0    # seconds between progress lines when stderr is not a terminal (a log file, a pipe)
+POOR_FIT = 0.1      # ‖Av − b‖/‖b‖ above this after a solve: the cube does not explain the measurement
+
+
 class ProgressBar:
-    """A tqdm bar over iterations showing the objective, the data term, the relative change and the rank."""
+    """Progress over iterations (objective, data term, relative change, rank): a tqdm bar on a terminal, a line
+    every LOG_EVERY seconds and at the end elsewhere (a redrawn bar would make a log one long line)."""
 
     def __init__(self, total: int, quiet: bool):
-        self.bar = None if quiet else _tqdm(total)
+        self.total = total
+        self.bar = None if quiet or not sys.stderr.isatty() else _tqdm(total)
+        self.quiet = quiet
         self.last_objective = "-"
+        self.last_line = self.start = time.monotonic()
+        self.record = None
 
     def __enter__(self):
-        return None if self.bar is None else self.update
+        return None if self.quiet else self.update
 
     def update(self, record: dict):
+        self.record = record
         fields = {"data": f"{record['data']:.4g}", "change": f"{record['change']:.2e}", "rank": record["rank"]}
         if record["objective"] == record["objective"]:  # not NaN
             self.last_objective = f"{record['objective']:.5g}"
         fields["objective"] = self.last_objective
-        self.bar.set_postfix(fields, refresh=False)
-        self.bar.update(1)
+        if self.bar is not None:
+            self.bar.set_postfix(fields, refresh=False)
+            self.bar.update(1)
+        elif time.monotonic() - self.last_line >= LOG_EVERY:
+            self._line(fields)
+
+    def _line(self, fields: dict):
+        self.last_line = time.monotonic()
+        print(f"clsdcam: iteration {self.record['iteration']}/{self.total} "
+              f"({self.last_line - self.start:.0f} s) " + ", ".join(f"{k} {v}" for k, v in fields.items()),
+              file=sys.stderr, flush=True)
 
     def __exit__(self, *exc):
         if self.bar is not None:
             self.bar.close()
+        elif self.record is not None and not self.quiet:
+            self._line({"objective": self.last_objective})
 
 
 def _tqdm(total: int):
@@ -79,6 +101,11 @@ def report(result, output: Path):
           f"(stopped: {result.stop_reason}) in {seconds:.1f} s ({per_iteration:.3f} s/iteration) "
           f"on {result.attrs['backend']} [{result.attrs['device']}]")
     print("skipped: " + result.attrs["skips"].replace("\n", "\n         "))
+    fit = result.attrs.get("relative_residual", 0.0)
+    print(f"fit: ‖Av − b‖/‖b‖ = {100 * fit:.2g}% (the part of the measurement the cube does not explain)")
+    if fit > POOR_FIT:
+        print(f"clsdcam: warning: the cube leaves {100 * fit:.0f}% of the measurement unexplained: is the calibration "
+              "the camera's, with the measurement's crop and orientation?", file=sys.stderr)
 
 
 def print_accuracy(cube, truth, label=""):
