@@ -71,17 +71,22 @@ class Phases:
         self._refreshes = 0                         # bases re-read at the same rank
         self.chosen: dict = {}                      # what auto weights chose, for the result's attributes
 
-    def run(self, problem: Problem, warm_started: bool) -> tuple[str, Problem]:
-        """(stop reason, the problem the final iterate lives in)."""
+    def run(self, problem: Problem, warm_started: bool, basis: np.ndarray | None = None, core: int = 0
+            ) -> tuple[str, Problem]:
+        """(stop reason, the problem the final iterate lives in); ``basis`` (and its ``core`` rank): a previous
+        solve's subspace, entered at once."""
         self.problem = problem
         try:
-            return self._run_phases(warm_started), self.problem
+            return self._run_phases(warm_started, basis, core), self.problem
         except KeyboardInterrupt:     # between FISTA runs; moves between spaces finish first (held_interrupt)
             return "interrupted", self.problem
 
-    def _run_phases(self, warm_started: bool) -> str:
+    def _run_phases(self, warm_started: bool, basis, core: int) -> str:
         iters, loop = self.settings.iters, self.loop
-        if self._subspace_allowed():
+        if self._subspace_allowed() and basis is not None:
+            with held_interrupt():
+                self.problem = self._enter_basis(self.problem, basis, max(core, 1), "carried from the previous solve")
+        elif self._subspace_allowed():
             reason = None if warm_started else self._warm_up()
             if reason:
                 return reason
@@ -167,13 +172,30 @@ class Phases:
             report.lines.append(subspace_line(self.n_bands, self.n_bands, 0, 1.0,
                                               f"{rank} directions hold the spectra: band space is cheaper"))
             return problem
-        self._core = rank
-        subspace = self._subspace_problem(basis)
-        self.loop.change_space(subspace.subspace.project, self._step(subspace.subspace.lipschitz), subspace.objective)
         how = f"--rank {rank}" if self.settings.rank else \
             f"spectra settled; a mean sin² of at most {ENTRY_TAIL:g} of the lit spectra outside"
-        report.lines.append(subspace_line(rank, self.n_bands, self.loop.iterations + 1, spectra.captured(rank), how))
+        return self._enter_basis(problem, basis, rank, how, spectra.captured(rank))
+
+    def _enter_basis(self, problem: Problem, basis: np.ndarray, core: int, how: str, captured: float = 1.0) -> Problem:
+        """FISTA onto ``basis`` (c = Bᵀx), said in the skip report."""
+        self._core = core
+        subspace = self._subspace_problem(basis)
+        self.loop.change_space(subspace.subspace.project, self._step(subspace.subspace.lipschitz), subspace.objective)
+        self.tracker.report.lines.append(subspace_line(basis.shape[1], self.n_bands, self.loop.iterations + 1,
+                                                       captured, how))
         return subspace
+
+    # ---- what the next solve can carry ----------------------------------------------------------
+    def basis(self) -> np.ndarray | None:
+        """The basis of the space the solve ended in (None: band space)."""
+        return None if self.problem.subspace is None else self.problem.subspace.basis
+
+    def core(self) -> int:
+        return self._core
+
+    def step_factor(self) -> float:
+        """The final step times the Lipschitz constant of its space (1 unless backed off)."""
+        return self.loop.step * self._lipschitz
 
     def _subspace_problem(self, basis: np.ndarray, start=None) -> Problem:
         sub = SpectralSubspace(self.solver.model, basis, self.priors, self.solver.calibration.filters, start)

@@ -35,6 +35,7 @@ from .priors import PRIORS, ProxAverage, build_priors, singular_values
 from .problem import Problem
 from .settings import Settings
 from .skips import bands_line, field_line, plan_geometry, terms_line
+from .state import SolverState
 
 __all__ = ["Result", "Settings", "Solver", "reconstruct"]
 
@@ -47,6 +48,7 @@ class Result:
     attrs: dict
     full_field: np.ndarray | None = None
     snapshots: dict[int, np.ndarray] = field(default_factory=dict)  # iteration -> (K, H, W) cube
+    state: SolverState | None = None     # what the next frame of a stream can start from (clsdcam.state)
 
     @property
     def iterations(self) -> int:
@@ -80,12 +82,13 @@ class Solver:
         self.b = None          # the measurement being solved, divided by max|b|, on the device
 
     def solve(self, measurement: np.ndarray, x0: np.ndarray | None = None,
-              progress: Callable[[dict], None] | None = None, snapshots=()) -> Result:
+              progress: Callable[[dict], None] | None = None, snapshots=(), state: SolverState | None = None) -> Result:
         """Reconstruct one (H, W) measurement.
 
         x0 is an optional warm start in data units: a (K, H, W) cube or a whole field (``Result.full_field``);
-        ``snapshots`` lists iterations at which a copy of the cube is kept in ``Result.snapshots`` (e.g. to
-        measure accuracy on the way).
+        ``state`` (a previous ``Result.state`` of this solver, e.g. the last frame of a video) starts from its
+        field instead and carries its basis, rank, step and weights (:mod:`clsdcam.state`); ``snapshots`` lists
+        iterations at which a copy of the cube is kept in ``Result.snapshots`` (e.g. to measure accuracy).
         """
         b = self._checked(measurement)
         scale = float(np.max(np.abs(b)))
@@ -94,20 +97,28 @@ class Solver:
         be, s = self.backend, self.settings
         self.b = be.to_device(b / scale)
         priors = build_priors(be, s, DataReferences(self).value)
+        if state is not None:
+            state.apply_weights(priors)
         problem = self.band_problem(priors)
-        loop = Fista(be, self._start(x0, scale), step=s.step_scale / self.lipschitz, objective=problem.objective,
+        start = self._start(x0, scale) if state is None else be.scale(self.calibration.scale / scale, state.field)
+        step = (state.step_factor if state else s.step_scale) / self.lipschitz
+        loop = Fista(be, start, step=step, objective=problem.objective,
                      rules=Rules(tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart))
         tracker = Tracker(self.model, scale, snapshots, progress)
         off = [row.name for row in PRIORS if row.name not in {p.name for p in priors}]
         tracker.report.lines += [line for line in (field_line(self.geometry), self._bands_line(), terms_line(off))
                                  if line]
         phases = Phases(self, loop, tracker, priors)
-        reason, problem = phases.run(problem, warm_started=x0 is not None)
+        reason, problem = phases.run(problem, warm_started=x0 is not None or state is not None,
+                                     basis=state.basis if state else None, core=state.core if state else 0)
         tracker.report.lines += [line for line in (phases.refreshes_line(),) if line]
-        out = self._result(problem.solution(loop.x), scale, loop.history, reason, priors, loop.step, tracker)
+        field = problem.solution(loop.x)
+        out = self._result(field, scale, loop.history, reason, priors, loop.step, tracker)
         out.attrs.update({f"{p.name}_chosen": p.relative for p in priors}, **phases.chosen)
         out.attrs["relative_residual"] = self._relative_residual(problem, loop.x)
         out.snapshots = tracker.kept
+        out.state = SolverState(be.scale(scale / self.calibration.scale, field), phases.basis(), phases.core(),
+                                phases.step_factor(), {p.name: p.relative for p in priors})
         return out
 
     def _relative_residual(self, problem: Problem, x) -> float:

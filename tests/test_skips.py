@@ -125,3 +125,17 @@ def test_ctrl_c_while_the_iterates_change_space_stops_with_a_whole_cube(leds, mo
     assert result.stop_reason == "interrupted" and result.iterations == after
     assert "subspace:" in result.attrs["skips"]
     assert np.isfinite(result.cube).all() and result.cube.min() >= 0 and result.cube.max() > 0
+
+
+def test_a_stream_carries_the_solver_state(leds):
+    """The next frame starts from the last field, in the basis the last solve ended in (no band-space warm-up,
+    the rank kept), with its step and its chosen TV weight (not estimated again)."""
+    solver = Solver(leds.calibration, settings=Settings(iters=150))
+    first = solver.solve(leds.measurement)
+    final_rank = first.history[-1]["rank"]
+    assert final_rank < 64 and first.state.basis.shape[1] == final_rank
+    again = solver.solve(leds.measurement, state=first.state)
+    assert again.history[0]["rank"] == final_rank and "carried from the previous solve" in again.attrs["skips"]
+    assert again.attrs["tv_chosen"] == pytest.approx(first.attrs["tv_chosen"]) and "tv: auto" not in again.attrs["skips"]
+    assert again.history[0]["data"] <= 1.05 * first.history[-1]["data"]              # it starts where the last ended
+    assert psnr(again.cube, leds.truth) >= psnr(first.cube, leds.truth) - 0.1
