@@ -126,9 +126,9 @@ class Fista:
                     record.update(self._checkpoint(record))
                 record["objective"] = record.get("objective", math.nan)
                 record["seconds"] = time.perf_counter() - self._start
+                self.history.append(record)        # counted before the callback: a Ctrl-C inside it keeps it
                 if on_iteration is not None:
                     on_iteration(record, self.x)
-                self.history.append(record)
                 reason = self._stop_reason(record, should_stop)
                 if reason:
                     return reason

@@ -49,8 +49,9 @@ POOR_FIT = 0.1      # ‖Av − b‖/‖b‖ above this after a solve: the cube 
 
 
 class ProgressBar:
-    """Progress over iterations (objective, data term, relative change, rank): a tqdm bar on a terminal, a line
-    every LOG_EVERY seconds and at the end elsewhere (a redrawn bar would make a log one long line)."""
+    """Progress over iterations (objective, data term, relative change, rank): a tqdm bar on a terminal; elsewhere a
+    line after the first iteration (the work has started), every LOG_EVERY seconds and at the end (a redrawn bar
+    would make a log one long line)."""
 
     def __init__(self, total: int, quiet: bool):
         self.total = total
@@ -59,6 +60,7 @@ class ProgressBar:
         self.last_objective = "-"
         self.last_line = self.start = time.monotonic()
         self.record = None
+        self.lines = 0
 
     def __enter__(self):
         return None if self.quiet else self.update
@@ -72,11 +74,12 @@ class ProgressBar:
         if self.bar is not None:
             self.bar.set_postfix(fields, refresh=False)
             self.bar.update(1)
-        elif time.monotonic() - self.last_line >= LOG_EVERY:
+        elif self.lines == 0 or time.monotonic() - self.last_line >= LOG_EVERY:
             self._line(fields)
 
     def _line(self, fields: dict):
         self.last_line = time.monotonic()
+        self.lines += 1
         print(f"clsdcam: iteration {self.record['iteration']}/{self.total} "
               f"({self.last_line - self.start:.0f} s) " + ", ".join(f"{k} {v}" for k, v in fields.items()),
               file=sys.stderr, flush=True)

@@ -77,6 +77,15 @@ def test_sigkill_of_a_reconstruction_at_any_moment_leaves_nothing_or_a_complete_
             assert f["cube"].shape == (4, 32, 40) and f.attrs["iterations"] == 200
 
 
+def wait_for_progress(process):
+    """Read stderr (a pipe: progress comes as lines, the first after iteration 1) up to the first progress line;
+    fail, rather than wait for ever, if the process ends first."""
+    for line in process.stderr:
+        if line.startswith("clsdcam: iteration "):
+            return
+    pytest.fail(f"the reconstruction ended (exit {process.wait()}) before any progress line")
+
+
 @pytest.mark.stress
 @pytest.mark.parametrize("save", [False, True])
 def test_ctrl_c_writes_the_best_cube_only_when_asked(tmp_path, save):
@@ -86,8 +95,7 @@ def test_ctrl_c_writes_the_best_cube_only_when_asked(tmp_path, save):
     args = [sys.executable, "-m", "clsdcam.cli", "reconstruct", str(sim_dir / "measurement.npy"), "--calibration",
             str(sim_dir / "calibration.h5"), "-o", str(output), "--iters", "1000000"]
     process = subprocess.Popen(args + (["--save-on-interrupt"] if save else []), stderr=subprocess.PIPE, text=True)
-    while "it/s" not in process.stderr.read(200):  # the progress bar is running
-        pass
+    wait_for_progress(process)
     process.send_signal(signal.SIGINT)
     err = process.communicate(timeout=60)[1]
     assert process.returncode == 130 and "Traceback" not in err
