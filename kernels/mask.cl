@@ -22,8 +22,7 @@ __kernel void mask_spread(__global REAL *field, __global const REAL *F, __global
     int X = get_global_id(0), Y = get_global_id(1), k = get_global_id(2);
     if (X >= Wp || Y >= Hp) return;
     int y = Y - oy, x = X - ox;
-    REAL v = 0;
-    if (y >= 0 && y < H && x >= 0 && x < W)
-        v = F[at3(k, y, x, H, W)] * r[(size_t)y * W + x];
-    field[at3(k, Y, X, Hp, Wp)] = v;
+    int cy = clamp(y, 0, H - 1), cx = clamp(x, 0, W - 1);     /* unconditional loads, then a select (see pad) */
+    REAL v = F[at3(k, cy, cx, H, W)] * r[(size_t)cy * W + cx];
+    field[at3(k, Y, X, Hp, Wp)] = (y >= 0 && y < H && x >= 0 && x < W) ? v : (REAL)0;
 }

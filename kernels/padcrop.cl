@@ -7,7 +7,9 @@ __kernel void pad(__global REAL *out, __global const REAL *x,
     int X = get_global_id(0), Y = get_global_id(1), b = get_global_id(2);
     if (X >= Wp || Y >= Hp) return;
     int y = Y - oy, xx = X - ox;
-    out[at3(b, Y, X, Hp, Wp)] = (y >= 0 && y < h && xx >= 0 && xx < w) ? x[at3(b, y, xx, h, w)] : (REAL)0;
+    /* an unconditional load of the nearest window element, then a select: vector loads on CPUs, no divergence */
+    REAL v = x[at3(b, clamp(y, 0, h - 1), clamp(xx, 0, w - 1), h, w)];
+    out[at3(b, Y, X, Hp, Wp)] = (y >= 0 && y < h && xx >= 0 && xx < w) ? v : (REAL)0;
 }
 
 /* crop: out[b,y,x] = x[b, oy+y, ox+x], the (h, w) window at (oy, ox).

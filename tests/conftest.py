@@ -33,3 +33,44 @@ def default_sigint():
     inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
     yield
     signal.signal(signal.SIGINT, inherited)
+
+
+# ---- the OpenCL parity suite's options (tests/test_parity.py; PYOPENCL_CTX picks its device) ----------------
+def pytest_addoption(parser):
+    group = parser.getgroup("clsdcam-opencl", "OpenCL parity (tests/test_parity.py; PYOPENCL_CTX picks the device)")
+    group.addoption("--cl-path", default="all", choices=("all", "host", "device"),
+                    help="the code paths to test on the device: all it runs (host and device on CPUs), or one")
+    group.addoption("--cl-tiny", action="store_true",
+                    help="tiny problems only, for interpreting devices (Oclgrind): smaller reconstructions, no "
+                         "ten-million-term sums")
+    group.addoption("--cl-keep-buffers", action="store_true",
+                    help="never release an OpenCL buffer (Oclgrind's uninitialised-value check gives a new buffer the "
+                         "shadow of a released one with the same index)")
+
+
+@pytest.fixture(scope="session")
+def cl_tiny(request) -> bool:
+    """--cl-tiny: tiny problems only (an interpreting device)."""
+    return request.config.getoption("--cl-tiny")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def cl_keep_buffers(request):
+    """--cl-keep-buffers: every pyopencl Buffer made from here on is kept until the session ends. Oclgrind reuses a
+    released buffer's index and its uninitialised-value check keeps that index's old shadow (jrprice/Oclgrind: the
+    plugin has no release hook): without this, a new buffer larger than the old one reads as uninitialised."""
+    if not request.config.getoption("--cl-keep-buffers"):
+        yield
+        return
+    import pyopencl as cl
+
+    kept, buffer_class = [], cl.Buffer
+
+    class KeptBuffer(buffer_class):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            kept.append(self)
+
+    cl.Buffer = KeptBuffer
+    yield
+    cl.Buffer = buffer_class

@@ -1,8 +1,10 @@
 """OpenCL vs NumPy: every primitive, the forward model and a whole reconstruction.
 
-Runs on whatever OpenCL device the machine has (PoCL in CI, a GPU when one is lent), on both code
-paths a device can run (the host path on CPU devices) and every FFT engine of each; skipped cleanly
-when there is no OpenCL platform.
+Runs on the device ``cl_devices.choose_device()`` picks (PYOPENCL_CTX names another; PoCL in CI, a GPU when
+one is lent; ``tests/test_portability.py`` runs this file on every installed OpenCL platform), on each code
+path the device runs (host and device on CPU devices; ``--cl-path`` keeps one) and every FFT engine of each;
+``--cl-tiny`` keeps the problems tiny for interpreting devices (Oclgrind). Skipped cleanly when there is no
+OpenCL platform.
 Tolerances, relative to max|reference|: elementwise 1e-6, FFT-based 2e-6 + 5e-7·log10(N),
 reductions 1e-5.
 """
@@ -29,30 +31,57 @@ from clsdcam.backends.cl_host import MappedHostCode  # noqa: E402
 from clsdcam.backends.fft import ReiknaFFT, available_engines  # noqa: E402
 from clsdcam.backends.opencl import OpenCLBackend  # noqa: E402
 
-CPU = bool(DEVICE.type & cl_devices.import_pyopencl().device_type.CPU)
+CPU = cl_devices.is_cpu(DEVICE)
 DTYPES = ["float32"] + (["float64"] if cl_devices.has_fp64(DEVICE) else [])
-# every FFT engine of every path this device runs: "host" is the host path (CPU devices), the others the device path
-ENGINES = (available_engines("host") if CPU else []) + available_engines("device") + ["reikna-unpacked"]
-DEFAULT_ENGINE = "host" if CPU else "reikna"
+# every FFT engine of each path: "host" is the host path (CPU devices), the others the device path
+PATH_ENGINES = {"host": available_engines("host"), "device": available_engines("device") + ["reikna-unpacked"]}
+PATH_BACKEND = {"host": "host", "device": "reikna"}      # the engine of a path's tests without FFTs
 K, FIELD, SENSOR, OFFSET = 3, (22, 30), (11, 15), (5, 7)
 ELEMENTWISE, REDUCTION = 1e-6, 1e-5
+# reconstructions: (sensor, bands, iterations) of the simulated scene; --cl-tiny: 10 band-space iterations, then 2
+# in the subspace
+RECONSTRUCTION = {False: ((32, 48), 8, 50), True: ((12, 16), 4, 12)}
+ALL_PRIORS = {"tv": 3e-3, "lowrank": 0.02, "l1": 1e-3, "rank": 3}
+PRIOR_SETS = [{"tv": 3e-3, "rank": 3}, ALL_PRIORS, {"spectral": 0.05, "rank": 3}, {"skip": False}]
+
+
+def device_paths(config) -> list[str]:
+    """The code paths under test: those the device runs (host on CPU devices, device everywhere), --cl-path's."""
+    chosen = config.getoption("--cl-path")
+    return [path for path in (["host"] if CPU else []) + ["device"] if chosen in ("all", path)]
+
+
+def pytest_generate_tests(metafunc):
+    """``path``: each path under test; ``engine``: every FFT engine of each; ``priors``: the reconstructions' prior
+    sets (one, every prior, under --cl-tiny)."""
+    paths = device_paths(metafunc.config)
+    if "path" in metafunc.fixturenames:
+        metafunc.parametrize("path", paths)
+    if "engine" in metafunc.fixturenames:
+        metafunc.parametrize("engine", [engine for path in paths for engine in PATH_ENGINES[path]])
+    if "priors" in metafunc.fixturenames:
+        metafunc.parametrize("priors", [ALL_PRIORS] if metafunc.config.getoption("--cl-tiny") else PRIOR_SETS)
 
 _BACKENDS: dict = {}
 
 
-def opencl(dtype="float32", engine=DEFAULT_ENGINE, kahan=None) -> OpenCLBackend:
-    """One backend per (dtype, engine, accumulator) for the whole session (PoCL compiles slowly); the engine
-    names the path: host for "host", device for the others."""
+def opencl(dtype="float32", engine="reikna", kahan=None) -> OpenCLBackend:
+    """One backend per (dtype, engine, accumulator) for the whole session (PoCL compiles slowly)."""
     key = (dtype, engine, kahan)
     if key not in _BACKENDS:
-        base = "reikna" if engine == "reikna-unpacked" else engine
-        backend = OpenCLBackend(dtype, device=DEVICE, fft=base, path="host" if base == "host" else "device",
-                                kahan=kahan)
-        if engine == "reikna-unpacked":
-            backend.fft = ReiknaFFT(backend.kernels, pack=False)
-            backend.fft_engine = "reikna-unpacked"
-        _BACKENDS[key] = backend
+        _BACKENDS[key] = new_backend(dtype, engine, kahan)
     return _BACKENDS[key]
+
+
+def new_backend(dtype, engine, kahan=None) -> OpenCLBackend:
+    """A backend on DEVICE whose engine names its path: host for "host", device for the others
+    ("reikna-unpacked": reikna with one band per complex transform)."""
+    base = "reikna" if engine == "reikna-unpacked" else engine
+    backend = OpenCLBackend(dtype, device=DEVICE, fft=base, path="host" if base == "host" else "device", kahan=kahan)
+    if engine == "reikna-unpacked":
+        backend.fft = ReiknaFFT(backend.kernels, pack=False)
+        backend.fft_engine = "reikna-unpacked"
+    return backend
 
 
 def fft_tolerance(n: int) -> float:
@@ -149,19 +178,18 @@ FFT_CASES = ["fft2", "ifft2", "fft2_roundtrip"]
 
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("case", ELEMENTWISE_CASES)
-def test_elementwise(case, dtype):
+def test_elementwise(case, dtype, path):
     a = inputs(dtype)
-    assert relative_error(run(opencl(dtype), case, a), run(NumpyBackend(dtype), case, a)) <= ELEMENTWISE
+    assert relative_error(run(opencl(dtype, PATH_BACKEND[path]), case, a), run(NumpyBackend(dtype), case, a)) <= ELEMENTWISE
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("case", REDUCTION_CASES)
-def test_reduction(case, dtype):
+def test_reduction(case, dtype, path):
     a = inputs(dtype)
-    assert relative_error(run(opencl(dtype), case, a), run(NumpyBackend(dtype), case, a)) <= REDUCTION
+    assert relative_error(run(opencl(dtype, PATH_BACKEND[path]), case, a), run(NumpyBackend(dtype), case, a)) <= REDUCTION
 
 
-@pytest.mark.parametrize("engine", ENGINES)
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("case", FFT_CASES)
 def test_fft(case, dtype, engine):
@@ -170,7 +198,6 @@ def test_fft(case, dtype, engine):
     assert error <= fft_tolerance(FIELD[0] * FIELD[1])
 
 
-@pytest.mark.parametrize("engine", ENGINES)
 @pytest.mark.parametrize("shape", [(2, 21, 31), (5, 16, 9), (1, 7, 6)])
 def test_fft_odd_shapes_and_band_counts(shape, engine):
     """Odd sizes, odd band counts (one unpaired band when packing) and a single band."""
@@ -183,8 +210,10 @@ def test_fft_odd_shapes_and_band_counts(shape, engine):
 
 
 @pytest.mark.parametrize("kahan", [None, True])
-def test_reductions_over_ten_million_terms(kahan):
+def test_reductions_over_ten_million_terms(kahan, cl_tiny):
     """vdot/l1/amax over 10⁷+1 float32 terms against float64 NumPy (also the Kahan float32 path)."""
+    if cl_tiny:
+        pytest.skip("--cl-tiny: no ten-million-term sums on an interpreting device")
     be = opencl("float32", kahan=kahan)
     x = np.random.default_rng(5).random(10_000_001).astype(np.float32) + np.float32(0.5)
     x64 = x.astype(np.float64)
@@ -218,7 +247,6 @@ def test_unknown_device_lists_the_available_ones():
 
 # ---- the model and the solver --------------------------------------------------------------
 
-@pytest.mark.parametrize("engine", ENGINES)
 @pytest.mark.parametrize("field", [None, (25, 33)])
 def test_forward_model_and_adjoint(field, engine):
     from clsdcam.model import ForwardModel
@@ -238,13 +266,13 @@ def test_forward_model_and_adjoint(field, engine):
 
 
 @pytest.fixture(scope="module")
-def simulation():
+def simulation(cl_tiny):
     from clsdcam.sim import simulate
 
-    return simulate(scene="leds", shape=(32, 48), n_bands=8, seed=0)
+    shape, bands, _ = RECONSTRUCTION[cl_tiny]
+    return simulate(scene="leds", shape=shape, n_bands=bands, seed=0)
 
 
-@pytest.mark.parametrize("engine", ENGINES)
 def test_convolution_with_unseen_bands_and_fused_step(engine):
     """The model's convolution on OpenCL (mapped host pipeline or primitives) against NumPy's, bands 1 and 3 unseen."""
     from clsdcam.convolution import filtered_convolution
@@ -295,11 +323,10 @@ HOST_PATH_CASES = {"subspace_tv": 10 * ELEMENTWISE, "subspace_tv_weighted": 10 *
                    "tv_norm_xy": REDUCTION}
 
 
-@pytest.mark.parametrize("engine", sorted({DEFAULT_ENGINE, "reikna"}))
 @pytest.mark.parametrize("case", HOST_PATH_CASES)
-def test_host_code_primitives_on_both_paths(case, engine):
+def test_host_code_primitives_on_both_paths(case, path):
     a = inputs("float32", seed=4)
-    got = run(opencl("float32", engine), case, a)
+    got = run(opencl("float32", PATH_BACKEND[path]), case, a)
     assert relative_error(got, run(NumpyBackend("float32"), case, a)) <= HOST_PATH_CASES[case]
 
 
@@ -320,9 +347,11 @@ def test_host_memory_of_a_dropped_buffer_is_kept_until_its_queued_work_is_done()
     assert be.allocator.retiring() == 0 and be.to_host(kept).sum() == 64.0
 
 
-def test_dropped_temporaries_do_not_corrupt_later_results():
+def test_dropped_temporaries_do_not_corrupt_later_results(cl_tiny):
     """A device input dropped right after its kernel is queued (its host memory is ours on CPU devices) keeps
     its memory until the queue has done with it: mixes of temporaries stay exact, call after call."""
+    if cl_tiny:
+        pytest.skip("--cl-tiny: cubes of 64 bands are too large for an interpreting device")
     ref, rng = NumpyBackend("float32"), np.random.default_rng(9)
     be = opencl("float32", "reikna")                               # the kernels: their inputs are dropped at once
     for shape, rows in [((64, 300, 41), 6), ((64, 4, 4), 64)] * 3:
@@ -330,19 +359,47 @@ def test_dropped_temporaries_do_not_corrupt_later_results():
         assert relative_error(be.to_host(be.bandmix(be.to_device(x), matrix)), ref.bandmix(x, matrix)) <= 1e-5
 
 
-@pytest.mark.parametrize("engine", ENGINES)
-@pytest.mark.parametrize("priors", [{"tv": 3e-3, "rank": 3}, {"tv": 3e-3, "lowrank": 0.02, "l1": 1e-3, "rank": 3},
-                                    {"spectral": 0.05, "rank": 3}, {"skip": False}])
-def test_reconstruction_matches_numpy(simulation, priors, engine):
-    """50 float32 FISTA iterations on a simulated scene (band space and subspaces, every prior, tv auto): cubes
-    agree to 1e-4 (relative L2)."""
+def test_reconstruction_matches_numpy(simulation, priors, engine, cl_tiny):
+    """50 float32 FISTA iterations on a simulated scene (band space and subspaces, every prior, tv auto; --cl-tiny:
+    12): cubes agree to 1e-4 (relative L2)."""
+    assert_reconstructs(simulation, priors, opencl("float32", engine), RECONSTRUCTION[cl_tiny][2])
+
+
+def test_primitives_read_only_memory_they_wrote(simulation, engine, cl_tiny, garbage_memory):
+    """Every new device array starts as NaN, as a GPU's fresh memory is garbage: a reconstruction with every prior,
+    in band space and in the subspace, still matches NumPy (what Oclgrind's uninitialised-value check looks for,
+    here on any device and through every FFT engine)."""
+    assert_reconstructs(simulation, ALL_PRIORS, new_backend("float32", engine), RECONSTRUCTION[cl_tiny][2])
+
+
+@pytest.fixture
+def garbage_memory(monkeypatch):
+    """pyopencl.array.empty (every device array the backends allocate) fills each new array with 0xFF bytes (NaN)."""
+    import pyopencl as cl
+    import pyopencl.array as cla
+
+    empty = cla.empty
+
+    def garbage(queue, shape, dtype, *args, **kwargs):
+        array = empty(queue, shape, dtype, *args, **kwargs)
+        if array.nbytes:
+            cl.enqueue_fill_buffer(queue, array.base_data, np.uint8(0xFF), array.offset, array.nbytes)
+        return array
+
+    monkeypatch.setattr(cla, "empty", garbage)
+
+
+def assert_reconstructs(simulation, priors, backend, iters):
+    """``iters`` float32 FISTA iterations on ``backend`` against NumPy's: the same ranks (the subspace when a rank is
+    asked for), cubes within 1e-4 (relative L2)."""
     from clsdcam import Settings, Solver
 
-    settings = Settings(iters=50, **priors)
+    settings = Settings(iters=iters, **priors)
     ref = Solver(simulation.calibration, backend=NumpyBackend("float32"), settings=settings).solve(simulation.measurement)
-    got = Solver(simulation.calibration, backend=opencl("float32", engine), settings=settings).solve(simulation.measurement)
-    assert got.attrs["backend"] == "opencl" and got.iterations == 50
+    got = Solver(simulation.calibration, backend=backend, settings=settings).solve(simulation.measurement)
+    assert got.attrs["backend"] == "opencl" and got.iterations == iters
     assert [r["rank"] for r in got.history] == [r["rank"] for r in ref.history]     # the same skips taken
-    assert (min(r["rank"] for r in got.history) < 8) == bool(settings.rank)        # the subspace path when asked
+    bands = simulation.calibration.filters.shape[0]
+    assert (min(r["rank"] for r in got.history) < bands) == bool(settings.rank)    # the subspace path when asked
     error = np.linalg.norm(got.cube - ref.cube) / np.linalg.norm(ref.cube)
     assert error <= 1e-4

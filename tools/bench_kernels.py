@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark every backend primitive and one whole FISTA iteration, OpenCL vs NumPy.
+"""Benchmark every backend primitive and one whole FISTA iteration, OpenCL vs NumPy, against the memory's roof.
 
     python tools/bench_kernels.py [--size 320x448] [--bands 64] [--repeat 5] [--path auto] [--engine auto]
                                   [--dtype float32] [--device SUBSTRING] [--no-numpy] [--json PATH]
@@ -7,6 +7,9 @@
 The problem is the sensor H×W with the paper's 2H×2W field and K bands. Each row is the
 median of N timed runs after one warm-up, with queue.finish() before and after the timed
 part; "GB/s" is the minimum bytes read + written by the primitive divided by that time.
+The roofs, measured in the same run on one field cube: the host's STREAM-style copy (NumPy, one
+slice per core) and the device's own buffer-to-buffer ``enqueue_copy``, each 2·bytes/time; "% roof" is a
+row's GB/s as a fraction of the device's copy (NumPy's rows: of the host's).
 "forward" and "adjoint_step" are A and the fused gradient step y − s·Aᵀr through the backend's
 convolution (the host's chunked pocketfft pipeline on CPUs); "iteration" is one step of the solver's
 own FISTA loop on its band-space problem (forward, residual, fused adjoint step, TV prox with
@@ -17,6 +20,7 @@ from __future__ import annotations
 import argparse
 import importlib.metadata
 import json
+import os
 import platform
 import statistics
 import sys
@@ -136,6 +140,26 @@ def median_seconds(run, finish, repeat: int) -> float:
     return statistics.median(times)
 
 
+def host_copy_gbps(nbytes: int, repeat: int) -> float:
+    """STREAM copy with NumPy: one slice of ``nbytes`` per core copied by a thread each (NumPy lets go of the GIL)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    workers = os.cpu_count() or 1
+    src, dst = np.ones(nbytes // 8), np.empty(nbytes // 8)
+    parts = np.array_split(np.arange(src.size), workers)
+    bounds = [(part[0], part[-1] + 1) for part in parts if part.size]
+    with ThreadPoolExecutor(workers) as pool:
+        def copy():
+            list(pool.map(lambda b: np.copyto(dst[b[0]:b[1]], src[b[0]:b[1]]), bounds))
+        return 2 * src.nbytes / median_seconds(copy, lambda: None, repeat) / 1e9
+
+
+def device_copy_gbps(be, nbytes: int, repeat: int) -> float:
+    """The device's buffer-to-buffer ``enqueue_copy`` of ``nbytes``: 2·bytes / time."""
+    src, dst = be.to_device(np.ones(nbytes // be.dtype.itemsize)), be.empty((nbytes // be.dtype.itemsize,))
+    return 2 * src.nbytes / median_seconds(lambda: be.copy(src, out=dst), be.queue.finish, repeat) / 1e9
+
+
 def bench(be, p: Case, repeat: int, only) -> dict:
     finish = be.queue.finish if hasattr(be, "queue") else (lambda: None)
     results = {}
@@ -162,13 +186,18 @@ def environment(be) -> dict:
 
 def markdown(results: dict, meta: dict) -> str:
     cl, ref = results["opencl"], results.get("numpy", {})
+    roof = meta["roof_GBps"]
     lines = [f"device: {meta['device']} (driver {meta['driver_version']}), {meta['path']} path, FFT engine "
              f"{meta['fft_engine']}; "
              f"problem {meta['problem']}; median of {meta['repeat']}",
-             "", "| primitive | OpenCL ms | OpenCL GB/s | NumPy ms | NumPy GB/s | speed-up |", "|---|---:|---:|---:|---:|---:|"]
+             f"roofs: device enqueue_copy {roof['device_copy']:.1f} GB/s, host STREAM copy (NumPy, "
+             f"{os.cpu_count()} threads) {roof['host_copy']:.1f} GB/s",
+             "", "| primitive | OpenCL ms | OpenCL GB/s | % roof | NumPy ms | NumPy GB/s | % roof | speed-up |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for name, row in cl.items():
         other = ref.get(name)
-        cells = [name, f"{row['ms']:.2f}", _gb(row), f"{other['ms']:.2f}" if other else "—", _gb(other),
+        cells = [name, f"{row['ms']:.2f}", _gb(row), _share(row, roof["device_copy"]),
+                 f"{other['ms']:.2f}" if other else "—", _gb(other), _share(other, roof["host_copy"]),
                  f"{other['ms'] / row['ms']:.2f}×" if other else "—"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -176,6 +205,11 @@ def markdown(results: dict, meta: dict) -> str:
 
 def _gb(row) -> str:
     return f"{row['GBps']:.1f}" if row and row["GBps"] else "—"
+
+
+def _share(row, roof: float) -> str:
+    """A row's GB/s as a percentage of ``roof``."""
+    return f"{100 * row['GBps'] / roof:.0f} %" if row and row["GBps"] else "—"
 
 
 def main(argv=None) -> int:
@@ -186,8 +220,11 @@ def main(argv=None) -> int:
     problem = Case(sensor, args.bands, np.dtype(args.dtype))
     only = set(args.only.split(",")) if args.only else None
     be = OpenCLBackend(args.dtype, device=args.device, fft=args.engine, path=args.path)
+    cube = problem.sizes()["F"]
     meta = {**environment(be), "problem": f"sensor {sensor[0]}x{sensor[1]}, field {problem.field[0]}x{problem.field[1]}, "
-                                         f"{args.bands} bands, {args.dtype}", "repeat": args.repeat}
+                                         f"{args.bands} bands, {args.dtype}", "repeat": args.repeat,
+            "roof_GBps": {"device_copy": device_copy_gbps(be, cube, args.repeat),
+                          "host_copy": host_copy_gbps(cube, args.repeat)}}
     results = {"opencl": bench(be, problem, args.repeat, only)}
     if not args.no_numpy:
         results["numpy"] = bench(NumpyBackend(args.dtype), problem, args.repeat, only)

@@ -48,6 +48,19 @@ def _platform_devices(cl, platform) -> list:
         return []
 
 
+def is_cpu(device) -> bool:
+    """A CPU device: its memory is the host's (the host path runs on it). Oclgrind, a simulator, says it is every
+    type: a device that says GPU is taken as a GPU (device path, GPU launch shapes, memory of its own)."""
+    cl = import_pyopencl()
+    return bool(device.type & cl.device_type.CPU) and not device.type & cl.device_type.GPU
+
+
+def is_gpu(device) -> bool:
+    """A GPU that is not also a CPU (Oclgrind says both: it is chosen only by name, or when nothing else is there)."""
+    cl = import_pyopencl()
+    return bool(device.type & cl.device_type.GPU) and not device.type & cl.device_type.CPU
+
+
 def has_fp64(device) -> bool:
     return "cl_khr_fp64" in device.extensions or "cl_amd_fp64" in device.extensions
 
@@ -87,7 +100,8 @@ def choose_device(substring: str | None = None):
 
     With ``substring``: the first device whose platform or device name contains it
     (case-insensitive), else InputError listing the devices. Without: the PYOPENCL_CTX
-    choice when that variable is set, else the first GPU, else the first CPU, else the first device.
+    choice when that variable is set, else the first GPU, else the first CPU, else the first device
+    (:func:`is_gpu`, :func:`is_cpu`).
     """
     devices = _all_devices()
     if substring:
@@ -99,10 +113,9 @@ def choose_device(substring: str | None = None):
         raise InputError(f"--device {substring!r}: no OpenCL device matches; available: {names}")
     if os.environ.get("PYOPENCL_CTX"):
         return _pyopencl_ctx_device()
-    cl = import_pyopencl()
-    for wanted in (cl.device_type.GPU, cl.device_type.CPU):
+    for wanted in (is_gpu, is_cpu):
         for _, device in devices:
-            if device.type & wanted:
+            if wanted(device):
                 return device
     return devices[0][1]
 
@@ -151,13 +164,19 @@ def problem_bytes(sensor_shape, field_shape, n_bands: int, dtype="float32") -> t
     return total, max(field, spectrum, fft_work // 2)
 
 
+def memory_limits(device) -> tuple[int, int]:
+    """(global memory, largest single buffer) of ``device`` in bytes, as the driver reports them."""
+    return device.global_mem_size, device.max_mem_alloc_size
+
+
 def check_memory(device, needed: int, largest: int = 0) -> None:
     """InputError when ``needed`` bytes exceed the device's global memory, or ``largest`` its max allocation."""
     mib = 1 << 20
+    memory, max_alloc = memory_limits(device)
     advice = "use fewer bands, a smaller crop or field, or another --device (clsdcam devices lists them)"
-    if needed > device.global_mem_size:
+    if needed > memory:
         raise InputError(f"the problem needs about {needed / mib:.0f} MiB of device memory but "
-                         f"{describe(device)} has {device.global_mem_size / mib:.0f} MiB; {advice}")
-    if largest > device.max_mem_alloc_size:
+                         f"{describe(device)} has {memory / mib:.0f} MiB; {advice}")
+    if largest > max_alloc:
         raise InputError(f"the problem needs a {largest / mib:.0f} MiB buffer but {describe(device)} "
-                         f"allows at most {device.max_mem_alloc_size / mib:.0f} MiB per buffer; {advice}")
+                         f"allows at most {max_alloc / mib:.0f} MiB per buffer; {advice}")

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pyopencl as cl
 
-from .cl_devices import has_fp64
+from .cl_devices import has_fp64, is_cpu
 
 # Build order: common types first, then each family (reduce.cl before bandmix.cl, which uses acc_add).
 FAMILIES = ("common", "mask", "padcrop", "fft", "prox", "fista", "tv", "reduce", "bandmix")
@@ -88,7 +88,7 @@ class Kernels:
         self.program = program(queue.context, self.dtype, self.acc)
         self._kernels: dict[str, cl.Kernel] = {}
         self._partials: dict[tuple, tuple] = {}  # (groups, outputs) -> (host array, device buffer)
-        self.cpu = bool(self.device.type & cl.device_type.CPU)
+        self.cpu = is_cpu(self.device)
         self.max_group = min(LOCAL_CPU if self.cpu else LOCAL_1D, self.device.max_work_group_size)
         self.local_1d = 1 << (self.max_group.bit_length() - 1)      # a power of two
 

@@ -163,9 +163,16 @@ def reikna_thread(queue):
 # ---- VkFFT (optional) -------------------------------------------------------------------------
 
 class VkFFT(RealFFT):
-    """pyvkfft's out-of-place R2C / C2R (normalised like numpy); note C2R may overwrite its input."""
+    """pyvkfft's out-of-place R2C / C2R (normalised like numpy).
+
+    VkFFT's C2R reads the self-conjugate columns (k2 = 0, Wp/2) as they are and may overwrite its input, so the
+    inverse transforms a Hermitian copy (``fft_hermitian``): irfft2 of any half spectrum, the input kept."""
 
     name = "vkfft"
+
+    def __init__(self, kernels: Kernels):
+        super().__init__(kernels)
+        self._scratch = None            # the C2R input: one half spectrum, kept for the last shape
 
     def fast_length(self, n: int) -> int:
         return smooth_length(n, (2, 3, 5, 7))
@@ -175,7 +182,12 @@ class VkFFT(RealFFT):
         return out
 
     def inverse(self, spectrum, out):
-        _vkfft_app(self.queue, tuple(out.shape), self.kernels.dtype).ifft(spectrum, out)
+        k, hp, wp = out.shape
+        if self._scratch is None or self._scratch.shape != spectrum.shape:
+            self._scratch = cla.empty(self.queue, spectrum.shape, spectrum.dtype)
+        wh = np.int32(spectrum.shape[-1])
+        self.kernels.grid3("fft_hermitian", spectrum.shape, self._scratch, spectrum, np.int32(hp), np.int32(wp), wh)
+        _vkfft_app(self.queue, tuple(out.shape), self.kernels.dtype).ifft(self._scratch, out)
         return out
 
 

@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from .base import HOST_CODE, resolve_path
-from .cl_devices import check_memory, choose_device, context_queue, describe, import_pyopencl, problem_bytes, require_dtype
+from .cl_devices import (check_memory, choose_device, context_queue, describe, import_pyopencl, is_cpu, problem_bytes,
+                         require_dtype)
 from .numpy import COMPLEX_OF, real_dtype
 
 try:
@@ -28,8 +29,9 @@ except ImportError as _exc:  # no pyopencl: the constructor says how to install 
     cl = cla = None
     _IMPORT_ERROR = _exc
 
-GRAM_CHUNK = 4096     # pixels per gram work item (at least)
-BANDMIX_TILE = 16     # pixels per bandmix work item (as in bandmix.cl)
+GRAM_PIXELS = 64      # pixels per gram work item (at least)
+GRAM_GROUPS = 4       # gram work-groups per compute unit (at most), each for every (i, j)
+BANDMIX_ROWS = 8      # output bands per bandmix work item (as in bandmix.cl)
 
 
 class OpenCLBackend:
@@ -48,7 +50,7 @@ class OpenCLBackend:
         require_dtype(self.device, self.dtype)
         self.device_name = describe(self.device)
         self.context, self.queue = context_queue(self.device)
-        cpu = bool(self.device.type & cl.device_type.CPU)
+        cpu = is_cpu(self.device)
         self.path = resolve_path(path, cpu)
         self.kernels = Kernels(self.queue, self.dtype, kahan)
         self.allocator = HostBuffers(self.queue) if cpu else None
@@ -190,23 +192,27 @@ class OpenCLBackend:
         return self._drained(_total(self.kernels.reduce("tv_norm", x.shape[0] * x.shape[1], x, *_ints(*x.shape), *w)))
 
     def gram(self, x) -> np.ndarray:
-        """Work item (j, i, g) sums x_i·x_j over pixel chunk g (j ≥ i) in ACC; the host adds the chunks."""
+        """Work item (t, i, j) sums x_i·x_j over pixels t, t + T, … (j ≥ i) in ACC, its group adds them; the host adds
+        the groups' partials."""
         k, pixels = x.shape[0], x.size // x.shape[0]
-        groups = max(1, min(-(-pixels // GRAM_CHUNK), 4 * self.device.max_compute_units))
-        chunk = -(-pixels // groups)
+        local = self.kernels.local_1d
+        groups = max(1, min(-(-pixels // (GRAM_PIXELS * local)), GRAM_GROUPS * self.device.max_compute_units))
         partial = cla.empty(self.queue, (groups, k, k), self.kernels.acc)
         partial.fill(0, queue=self.queue)
-        self.kernels.launch("gram", (k, k, groups), None, partial, x, np.int32(k), np.int64(pixels), np.int64(chunk))
+        scratch = cl.LocalMemory(local * self.kernels.acc.itemsize)
+        self.kernels.launch("gram", (groups * local, k, k), (local, 1, 1), partial, scratch, x, np.int32(k),
+                            np.int64(pixels))
         upper = np.triu(self.to_host(partial).sum(axis=0, dtype=np.float64))
         return upper + np.triu(upper, 1).T
 
     def bandmix(self, x, matrix, out=None):
-        """One work item per BANDMIX_TILE pixels of one output band."""
+        """One work item per pixel and BANDMIX_ROWS output bands."""
         rows, cols = np.shape(matrix)
         target = self.target(out, (rows,) + x.shape[1:], x)
         pixels = x.size // x.shape[0]
         m = cla.to_device(self.queue, np.ascontiguousarray(matrix, dtype=self.dtype), allocator=self.allocator)
-        self.kernels.grid2("bandmix", -(-pixels // BANDMIX_TILE), rows, target, x, m, np.int32(cols), np.int64(pixels))
+        self.kernels.grid2("bandmix", pixels, -(-rows // BANDMIX_ROWS), target, x, m, np.int32(rows), np.int32(cols),
+                           np.int64(pixels))
         return self.deliver(target, out)
 
     def subspace_tv(self, c, basis, tau, weights, out=None):

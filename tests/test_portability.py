@@ -1,0 +1,120 @@
+"""The parity suite (tests/test_parity.py) on the device path (what GPUs run) of every OpenCL implementation this
+machine can have: PoCL, Intel's CPU runtime and Oclgrind, each in a process of its own (the ICD loader reads its
+variables when pyopencl loads; ``clsdcam.backends.cl_icd`` writes them).
+
+Oclgrind interprets every kernel and checks it: tiny problems, data races and uninitialised values on (out-of-bounds
+accesses always are), zero reports. Its uninitialised-value check needs ``-cl-opt-disable`` (optimised vector code
+trips it: jrprice/Oclgrind#126 and its shuffle and ``freeze`` handling) and buffers that are never released (see
+``--cl-keep-buffers``); reikna's twiddles call ``sincos`` into private memory, which that check cannot follow (a
+fatal error in its plugin), so reikna's runs on Oclgrind check data races and bounds only. An implementation
+that is not installed is a skip saying how to install it; one installed but not listed is a failure.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import xml.etree.ElementTree as ElementTree
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.opencl
+pytest.importorskip("pyopencl")
+
+from clsdcam.backends import cl_icd  # noqa: E402
+from clsdcam.backends.fft import available_engines  # noqa: E402
+
+REPO = Path(__file__).resolve().parent.parent
+OCLGRIND = {"OCLGRIND_DATA_RACES": "1"}
+OCLGRIND_ALL = {**OCLGRIND, "OCLGRIND_UNINITIALIZED": "1", "OCLGRIND_BUILD_OPTIONS": "-cl-opt-disable"}
+TINY = ("--cl-tiny",)
+
+
+@dataclass(frozen=True)
+class Platform:
+    """One run of the parity suite: the implementation (``pocl`` or a ``cl_icd`` name), its platform's name (for
+    PYOPENCL_CTX), the suite's options, extra variables, and the FFT engines whose tests must pass."""
+
+    name: str
+    implementation: str
+    platform: str
+    options: tuple = ()
+    env: dict = field(default_factory=dict)
+    engines: tuple = ()
+
+
+DEVICE_ENGINES = tuple(available_engines("device")) + ("reikna-unpacked",)
+CHECKED_ENGINES = tuple(e for e in DEVICE_ENGINES if "reikna" not in e)
+PLATFORMS = [
+    Platform("pocl", "pocl", "Portable Computing Language", engines=DEVICE_ENGINES),
+    Platform("intel", "intel", "Intel(R) OpenCL", engines=DEVICE_ENGINES),
+    Platform("oclgrind", "oclgrind", "Oclgrind", TINY + ("--cl-keep-buffers", "-k", "not reikna"), OCLGRIND_ALL,
+             CHECKED_ENGINES),
+    Platform("oclgrind-reikna", "oclgrind", "Oclgrind", TINY + ("-k", "reikna"), OCLGRIND,
+             ("reikna", "reikna-unpacked")),
+]
+
+
+def platform_environment(platform: Platform, folder: Path) -> dict[str, str]:
+    """The variables that list ``platform`` (skip when it is not installed, or when it is the device this process's
+    tests/test_parity.py runs on; fail when installed but not listed)."""
+    if platform.implementation == "pocl" and default_platform() == platform.platform:
+        pytest.skip("PoCL is this process's device: tests/test_parity.py runs its parity (both paths)")
+    if platform.implementation != "pocl" and cl_icd.library(platform.implementation) is None:
+        pytest.skip(f"{platform.platform} is not installed: {cl_icd.INSTALL[platform.implementation]}")
+    env = {**os.environ, **cl_icd.vendors_environment(folder), "PYOPENCL_CTX": platform.platform, **platform.env}
+    listed = subprocess.run([sys.executable, "-c", "import pyopencl as cl; print([p.name for p in cl.get_platforms()])"],
+                            env=env, capture_output=True, text=True, timeout=120)
+    if platform.platform not in listed.stdout:
+        if platform.implementation == "pocl":
+            pytest.skip(f"PoCL is not installed: pip install 'clsdcam[pocl]' ({listed.stdout.strip()})")
+        pytest.fail(f"{platform.platform} is installed but not listed: {listed.stdout} {listed.stderr[-2000:]}")
+    return env
+
+
+def default_platform() -> str | None:
+    """The platform of the device tests/test_parity.py picks in this process (None without one)."""
+    from clsdcam.backends import cl_devices
+    from clsdcam.errors import InputError
+
+    try:
+        return cl_devices.choose_device().platform.name.strip()
+    except InputError:
+        return None
+
+
+def outcomes(junit: Path) -> dict[str, str]:
+    """test name -> passed, skipped or failed, from a JUnit XML report."""
+    result = {}
+    for case in ElementTree.parse(junit).iter("testcase"):
+        kinds = {child.tag for child in case}
+        result[case.get("name")] = ("failed" if kinds & {"failure", "error"} else
+                                    "skipped" if "skipped" in kinds else "passed")
+    return result
+
+
+def parameters(test_name: str) -> list[str]:
+    """A test's parameter ids: ``test_fft[fft2-float32-reikna-unpacked]`` -> fft2, float32, reikna-unpacked."""
+    inside = test_name.partition("[")[2].rstrip("]").replace("reikna-unpacked", "reikna_unpacked")
+    return [part.replace("_unpacked", "-unpacked") for part in inside.split("-")]
+
+
+@pytest.mark.parametrize("platform", PLATFORMS, ids=lambda p: p.name)
+def test_parity_on_the_device_path(platform, tmp_path):
+    env = platform_environment(platform, tmp_path / "vendors")
+    junit, log = tmp_path / "parity.xml", tmp_path / "oclgrind.log"
+    command = [sys.executable, "-m", "pytest", "-q", "-rs", "-p", "no:cacheprovider", "-W", "ignore",
+               str(REPO / "tests" / "test_parity.py"), "--cl-path", "device", f"--junitxml={junit}", *platform.options]
+    done = subprocess.run(command, env={**env, "OCLGRIND_LOG": str(log)}, cwd=REPO, capture_output=True, text=True,
+                          timeout=1800)
+    assert done.returncode == 0, done.stdout[-6000:] + done.stderr[-3000:]
+    results = outcomes(junit)
+    passed = [name for name, outcome in results.items() if outcome == "passed"]
+    assert len(passed) >= 20, done.stdout[-3000:]
+    for engine in platform.engines:
+        assert any(engine in parameters(name) for name in passed), f"no {engine} test passed"
+    reports = log.read_text() if log.exists() else ""
+    assert not reports, reports[:6000]
+    print(f"{platform.name}: {len(passed)} passed, {sum(o == 'skipped' for o in results.values())} skipped")
