@@ -1,5 +1,6 @@
 """Many frames: frame sources, one stream, Dask workers (embedded and external), killed workers,
-resumed and interrupted batches, failed frames."""
+resumed and interrupted batches, failed frames, unwritable outputs, the output's provenance and
+dimension scales, the command's help."""
 import dataclasses
 import json
 import logging
@@ -14,6 +15,7 @@ import h5py
 import numpy as np
 import pytest
 import tifffile
+import xarray
 from distributed import Client, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 
@@ -21,10 +23,13 @@ from clsdcam.batch import BatchSpec, FrameSource, parts, parts_dir, predict, run
 from clsdcam.calibration import Calibration, PixelMask, Preprocessing, preprocess
 from clsdcam.cli import main
 from clsdcam.errors import InputError
+from clsdcam.fista import Fista
+from clsdcam.provenance import provenance, sha256
 from clsdcam.sim.video import simulate_video, write_video
 from clsdcam.solver import Settings, Solver, reconstruct
 
 N_FRAMES = 8
+SOLVE = Solver.solve
 
 
 @pytest.fixture(scope="module")
@@ -48,6 +53,12 @@ def cubes(path):
 def local_cluster():
     return LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                         silence_logs=logging.CRITICAL)
+
+
+def command(video, output, *options):
+    """``clsdcam batch`` on the video's frames, in this process, quiet."""
+    return ["batch", str(video["frames"]), "--calibration", str(video["calibration"]), "-o", str(output),
+            "--workers", "0", "--quiet", *options]
 
 
 def cold_reference(video, iters=30):
@@ -128,6 +139,109 @@ def test_an_interrupted_batch_resumes(video, tmp_path, monkeypatch):
     assert run_batch(spec(video), output, workers=0, chunk=2).computed_frames == 4
 
 
+def test_a_resume_removes_stale_temporaries_and_keeps_finished_parts(video, tmp_path):
+    """Temporaries left by a killed writer (or Ctrl-C on Dask workers) are removed when the batch resumes."""
+    output = tmp_path / "out.h5"
+    run_batch(spec(video), output, workers=0, chunk=2)
+    folder = parts_dir(output)
+    (folder / "chunk-000002-000004.h5").unlink()
+    stale = [folder / ".chunk-000002-000004.h5.0badf00d.h5", folder / ".chunk-000004-000006.h5.1234abcd.h5"]
+    for path in stale:
+        path.write_bytes(b"half an HDF5 file")
+    (folder / ".notes").write_text("not a part's temporary")
+    assert run_batch(spec(video), output, workers=0, chunk=2).computed_frames == 2
+    assert sorted(p.name for p in folder.iterdir()) == [".notes", "batch.json"] + [
+        f"chunk-{s:06d}-{s + 2:06d}.h5" for s in range(0, N_FRAMES, 2)]
+    assert np.isfinite(cubes(output)[0]).all()
+
+
+def interrupt_after(monkeypatch, frames):
+    """Solver.solve raises KeyboardInterrupt (Ctrl-C) once ``frames`` frames were solved."""
+    solved = []
+
+    def solve(self, *args, **kwargs):
+        if len(solved) == frames:
+            raise KeyboardInterrupt
+        solved.append(True)
+        return SOLVE(self, *args, **kwargs)
+
+    monkeypatch.setattr(Solver, "solve", solve)
+
+
+def test_ctrl_c_says_how_many_frames_were_kept(video, tmp_path, monkeypatch, capsys):
+    output = tmp_path / "out.h5"
+    interrupt_after(monkeypatch, 0)
+    assert main(command(video, output, "--chunk", "2", "--iters", "10")) == 130
+    assert capsys.readouterr().err == "clsdcam: interrupted; no output written\n"
+    assert not parts_dir(output).exists()
+    interrupt_after(monkeypatch, 2)  # after the first chunk
+    assert main(command(video, output, "--chunk", "2", "--iters", "10")) == 130
+    assert capsys.readouterr().err == (f"clsdcam: interrupted; 2 of {N_FRAMES} frames kept in "
+                                       f"{parts_dir(output.resolve())}/ — run the same command again to finish\n")
+    assert not output.exists()
+    monkeypatch.setattr(Solver, "solve", SOLVE)
+    assert main(command(video, output, "--chunk", "2", "--iters", "10")) == 0
+    assert f"{N_FRAMES} frames ({N_FRAMES - 2} computed now" in capsys.readouterr().out
+
+
+def test_a_ctrl_c_the_solver_caught_stops_the_batch(video, tmp_path, monkeypatch):
+    """FISTA turns Ctrl-C into the stop reason "interrupted"; in a batch that frame is not done and the batch stops."""
+    iterate, calls = Fista._iterate, []
+
+    def interrupted(self, *args):
+        calls.append(True)
+        if len(calls) == 15:  # in frame 1, of 10 iterations each
+            raise KeyboardInterrupt
+        return iterate(self, *args)
+
+    monkeypatch.setattr(Fista, "_iterate", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_batch(spec(video, iters=10), tmp_path / "out.h5", workers=0, chunk=2)
+    assert not parts_dir(tmp_path / "out.h5").exists()
+
+
+def test_an_unwritable_output_is_refused_before_any_frame_is_read(video, tmp_path, monkeypatch, capsys):
+    def unread(source, i):
+        raise AssertionError("a frame was read")
+
+    monkeypatch.setattr(stream, "_read", unread)
+    folder, taken = tmp_path / "cubes.h5", tmp_path / "other.h5.parts"
+    folder.mkdir()
+    taken.write_text("a file where the parts folder would go")
+    for output, why in ((folder, "is a directory"), ("/proc/nope.h5", "cannot write there"),
+                        (tmp_path / "other.h5", "cannot write there")):
+        assert main(command(video, output)) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("clsdcam: error: ") and why in err and len(err.splitlines()) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cubes.h5", "other.h5.parts"] and not any(folder.iterdir())
+
+
+def test_the_output_has_provenance_and_dimension_scales(video, tmp_path):
+    """Like a single cube: the inputs' SHA-256, preprocessing, command line…, and dims (frame, wavelength, y, x)."""
+    output = tmp_path / "out.h5"
+    run_batch(spec(video, iters=5), output, workers=0)
+    with xarray.open_dataset(output, engine="h5netcdf") as ds:
+        assert ds["cubes"].dims == ("frame", "wavelength", "y", "x") and ds["iterations"].dims == ("frame",)
+        np.testing.assert_array_equal(ds["wavelength"], Calibration.load(video["calibration"]).wavelengths)
+        assert ds["wavelength"].attrs["units"] == "nm" and np.isfinite(ds["cubes"].values).all()
+    with h5py.File(output, "r") as f:
+        attrs = dict(f.attrs)
+    expected = provenance({"frames": video["frames"].resolve(), "calibration": video["calibration"].resolve()},
+                          Preprocessing())
+    assert {k: attrs[k] for k in expected if k != "created"} == {k: v for k, v in expected.items() if k != "created"}
+    assert attrs["frames_sha256"] == sha256(video["frames"]) and attrs["warm_start"] and "settings" in attrs
+
+
+def test_batch_help_shows_defaults_and_ends_with_examples(capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["batch", "--help"])
+    text = capsys.readouterr().out
+    assert done.value.code == 0 and "(default: 1)" in text and "(default: numpy)" in text
+    options, examples = text.split("\nexamples:\n")
+    assert "--dead-pixels" in options and 2 <= examples.count("clsdcam batch ") <= 3
+    assert not any(flag in text for flag in ("--png", "--full-field", "--saturation"))
+
+
 class KillOnce(WorkerPlugin):
     """Kills its worker process (os._exit) twice in a batch, once per marker file: when a chunk task
     starts, then when a chunk task has written its part but its worker has not yet reported it."""
@@ -177,8 +291,8 @@ def test_external_scheduler_and_worker(video, tmp_path):
         code = main(["batch", str(video["frames"]), "--calibration", str(video["calibration"]), "-o",
                      str(tmp_path / "out.h5"), "--scheduler", address, "--iters", "20", "--quiet"])
         assert code == 0 and np.isfinite(cubes(tmp_path / "out.h5")[0]).all()
-        with Client(address, timeout=60) as client:
-            client.shutdown()
+        with Client(address, timeout=60, set_as_default=False) as client:  # shutdown() would leave dask's
+            client.shutdown()                                               # default scheduler set to this one
         assert scheduler.wait(timeout=30) == 0 and worker.wait(timeout=30) == 0
     finally:
         for process in (worker, scheduler):

@@ -10,8 +10,8 @@ from .distribute import run_batch
 from .frames import FrameSource
 from .motion import predict
 from .parts import chunk_bounds, parts_dir
-from .spec import BatchSpec, BatchSummary
+from .spec import BatchInterrupted, BatchSpec, BatchSummary
 from .stream import solve_chunk
 
-__all__ = ["BatchSpec", "BatchSummary", "FrameSource", "chunk_bounds", "parts_dir", "predict", "run_batch",
-           "solve_chunk"]
+__all__ = ["BatchInterrupted", "BatchSpec", "BatchSummary", "FrameSource", "chunk_bounds", "parts_dir", "predict",
+           "run_batch", "solve_chunk"]

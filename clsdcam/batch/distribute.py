@@ -9,9 +9,14 @@ the chunks run as one stream in this process, warm starts carried across them.
 
 Progress. Each finished frame is reported once (an event per frame from the workers; a
 re-run chunk repeats its events and they are counted once).
+
+Ctrl-C. The finished parts are kept; when they hold some frames, the KeyboardInterrupt is a
+:class:`~clsdcam.batch.spec.BatchInterrupted` saying how many, and running the same batch
+again computes only the others.
 """
 from __future__ import annotations
 
+import contextlib
 import shutil
 import threading
 import time
@@ -20,9 +25,11 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import InputError
+from ..io import check_output
+from ..provenance import provenance
 from .frames import FrameSource
 from .parts import assemble, chunks, claim, finished_parts, missing_frames, part_path, parts_dir
-from .spec import BatchSpec, BatchSummary
+from .spec import BatchInterrupted, BatchSpec, BatchSummary
 from .stream import failure_text, run_stream, solve_chunk
 
 
@@ -34,25 +41,44 @@ def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None =
     chunks); otherwise Dask distributed, an embedded LocalCluster of ``workers`` processes or
     the cluster at ``scheduler``. ``chunk`` defaults to ⌈missing / (2·worker threads)⌉, at
     most MAX_CHUNK. ``on_plan(n_frames, n_missing)`` is called once the missing frames are
-    known, ``progress(k)`` as k more frames are done.
+    known, ``progress(k)`` as k more frames are done. InputError before any work if ``output``
+    (or its parts folder) cannot be written.
     """
-    output = Path(output).resolve()
-    spec = replace(spec, frames=tuple(str(Path(p).resolve()) for p in spec.frames),
-                   calibration=str(Path(spec.calibration).resolve()))  # workers may run elsewhere
-    n = len(FrameSource(spec.frames))
-    parts = parts_dir(output)
+    output, spec = check_output(Path(output).resolve()), _resolved(spec)
+    source = FrameSource(spec.frames)
+    n, parts = len(source), parts_dir(output)
     if overwrite:
         shutil.rmtree(parts, ignore_errors=True)
         output.unlink(missing_ok=True)
     claim(parts, spec, n)
-    missing = missing_frames(parts, n)
-    if on_plan is not None:
-        on_plan(n, len(missing))
-    start = time.perf_counter()
-    lost = _compute(spec, parts, missing, (workers, scheduler, chunk), _Progress(progress))
-    summary = assemble(output, n, lost)
+    with _kept_on_interrupt(parts, n):
+        missing = missing_frames(parts, n)
+        if on_plan is not None:
+            on_plan(n, len(missing))
+        start = time.perf_counter()
+        lost = _compute(spec, parts, missing, (workers, scheduler, chunk), _Progress(progress))
+        summary = assemble(output, n, lost, provenance({"frames": source.paths, "calibration": spec.calibration},
+                                                       spec.preprocessing))
     summary.computed_frames, summary.seconds = len(missing), time.perf_counter() - start
     return summary
+
+
+def _resolved(spec: BatchSpec) -> BatchSpec:
+    """``spec`` with absolute paths (workers may run elsewhere)."""
+    return replace(spec, frames=tuple(str(Path(p).resolve()) for p in spec.frames),
+                   calibration=str(Path(spec.calibration).resolve()))
+
+
+@contextlib.contextmanager
+def _kept_on_interrupt(parts: Path, n: int):
+    """A KeyboardInterrupt in the block becomes BatchInterrupted when finished parts hold some of the n frames."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        kept = n - len(missing_frames(parts, n))
+        if kept:
+            raise BatchInterrupted(kept, n, parts) from None
+        raise
 
 
 def _compute(spec: BatchSpec, parts: Path, missing: list[int], how, progress) -> dict[int, str]:

@@ -6,14 +6,19 @@ Parts. Chunk [s, e) is written into a temporary file renamed to
 ``iterations``, ``stop_reason``, ``seconds``, ``error``.
 
 Resume. A frame is done when some part covers it; a re-run computes only the others (any
-chunk size, any worker count), cut into contiguous chunks. ``batch.json`` in the parts folder
-fingerprints the frames and settings, so parts made by a different command are never mixed in
-(``overwrite``): the fingerprint is SHA-256 of a canonical JSON text (sorted keys; dataclasses
-as their fields, tuples as lists, NumPy scalars as numbers), the same on any Python or NumPy.
+chunk size, any worker count), cut into contiguous chunks, after removing the temporaries
+(``.chunk-SSSSSS-EEEEEE.h5.RANDOM.h5``) that writers killed in earlier runs left behind.
+``batch.json`` in the parts folder fingerprints the frames and settings, so parts made by a
+different command are never mixed in (``overwrite``): the fingerprint is SHA-256 of a
+canonical JSON text (sorted keys; dataclasses as their fields, tuples as lists, NumPy scalars
+as numbers), the same on any Python or NumPy.
 
 Output. ``OUT.h5`` holds ``cubes`` (N,K,H,W), an HDF5 virtual dataset over the parts (NaN
-where a frame failed), ``wavelengths`` and per-frame ``iterations``, ``stop_reason``,
-``seconds``, ``error``; it is rebuilt, atomically, at the end of every run.
+where a frame failed), with dimension scales ``frame``, ``wavelength`` (nm), ``y``, ``x`` as
+single cubes have them (xarray's h5netcdf engine reads them as dims and coordinates), per-frame
+``iterations``, ``stop_reason``, ``seconds``, ``error`` (on the ``frame`` scale), and as
+attributes the provenance (:mod:`clsdcam.provenance`) and the batch's settings; it is
+rebuilt, atomically, at the end of every run.
 """
 from __future__ import annotations
 
@@ -27,12 +32,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io import atomic_output
+from ..io import atomic_output, check_output
 from .spec import BatchSpec, BatchSummary
 
 MAX_CHUNK = 64          # default chunk cap: bounds the work a crash loses and keeps tasks balanced
 TEXT_KEYS = ("stop_reason", "error")
 _PART = re.compile(r"chunk-(\d+)-(\d+)\.h5$")
+_TEMPORARY = re.compile(r"\.chunk-\d+-\d+\.h5\.[0-9a-f]+\.h5")  # atomic_output's name for a part being written
 
 
 # ---- names and chunks -------------------------------------------------------------------------
@@ -98,17 +104,19 @@ def stamp(spec: BatchSpec, n: int) -> dict:
 
 
 def claim(parts: Path, spec: BatchSpec, n: int):
-    """Fingerprint the batch in ``parts/batch.json``; InputError if the parts belong to another one."""
+    """Fingerprint the batch in ``parts/batch.json``; InputError if ``parts`` cannot be written or belongs to
+    another batch. A resume first removes the temporaries that earlier runs left (never a finished part)."""
     ours = stamp(spec, n)
-    path = parts / "batch.json"
-    if path.exists():
-        if json.loads(path.read_text())["fingerprint"] != ours["fingerprint"]:
-            raise InputError(f"{parts} holds frames of another batch (other frames, calibration or settings); "
-                             "use --overwrite to start again")
+    path = check_output(parts / "batch.json", "parts folder")
+    if not path.exists():
+        with atomic_output(path) as tmp:
+            tmp.write_text(json.dumps(ours, indent=1))
         return
-    parts.mkdir(parents=True, exist_ok=True)
-    with atomic_output(path) as tmp:
-        tmp.write_text(json.dumps(ours, indent=1))
+    if json.loads(path.read_text())["fingerprint"] != ours["fingerprint"]:
+        raise InputError(f"{parts} holds frames of another batch (other frames, calibration or settings); "
+                         "use --overwrite to start again")
+    for stale in (p for p in parts.iterdir() if _TEMPORARY.fullmatch(p.name)):
+        stale.unlink(missing_ok=True)
 
 
 # ---- reading and writing parts ----------------------------------------------------------------
@@ -138,8 +146,9 @@ def read_records(part: Path) -> list[dict]:
 
 
 # ---- the output -------------------------------------------------------------------------------
-def assemble(output: Path, n: int, lost: dict[int, str]) -> BatchSummary:
-    """OUT.h5: a virtual ``cubes`` over the parts (NaN where a frame failed or is ``lost``) and per-frame records."""
+def assemble(output: Path, n: int, lost: dict[int, str], attrs: dict) -> BatchSummary:
+    """OUT.h5: a virtual ``cubes`` over the parts (NaN where a frame failed or is ``lost``) with its dimension
+    scales, per-frame records, and ``attrs`` (the provenance) beside the batch's settings."""
     import h5py
 
     per_frame, layout, wavelengths = _gather(parts_dir(output), n)
@@ -149,11 +158,25 @@ def assemble(output: Path, n: int, lost: dict[int, str]) -> BatchSummary:
     if layout is None:
         raise InputError(f"no frame of {n} could be reconstructed; first error: {failed[0][1]}")
     with atomic_output(output) as tmp, h5py.File(tmp, "w") as f:
-        f.create_virtual_dataset("cubes", layout, fillvalue=np.nan)
-        f["wavelengths"] = wavelengths
+        cubes = f.create_virtual_dataset("cubes", layout, fillvalue=np.nan)
         write_columns(f, per_frame)
-        f.attrs.update(json.loads((parts_dir(output) / "batch.json").read_text()))
+        _attach_scales(f, cubes, wavelengths, per_frame)
+        f.attrs.update({**attrs, **json.loads((parts_dir(output) / "batch.json").read_text())})
     return BatchSummary(n_frames=n, computed_frames=0, failed=failed)
+
+
+def _attach_scales(f, cubes, wavelengths, columns):
+    """``cubes``' dimension scales: ``frame`` (also on the per-frame ``columns``), ``wavelength`` (nm), ``y``, ``x``."""
+    n, _, h, w = cubes.shape
+    axes = {"frame": np.arange(n), "wavelength": np.asarray(wavelengths, np.float64), "y": np.arange(h),
+            "x": np.arange(w)}
+    for axis, (label, values) in enumerate(axes.items()):
+        f[label] = values
+        f[label].make_scale(label)
+        cubes.dims[axis].attach_scale(f[label])
+    f["wavelength"].attrs.update(units="nm", long_name="band centre wavelength")
+    for key in columns:
+        f[key].dims[0].attach_scale(f["frame"])
 
 
 def _gather(parts: Path, n: int):

@@ -1,4 +1,5 @@
-"""What a batch is (:class:`BatchSpec`, everything a worker needs) and what it did (:class:`BatchSummary`)."""
+"""What a batch is (:class:`BatchSpec`, everything a worker needs) and what it did (:class:`BatchSummary`, or
+:class:`BatchInterrupted` when Ctrl-C stopped it with some frames kept)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -38,3 +39,13 @@ class BatchSummary:
     @property
     def exit_code(self) -> int:
         return 1 if self.failed else 0
+
+
+class BatchInterrupted(KeyboardInterrupt):
+    """Ctrl-C after ``kept`` of the ``n_frames`` frames were finished in ``parts``: they are kept, and running
+    the same batch again computes only the others."""
+
+    def __init__(self, kept: int, n_frames: int, parts):
+        super().__init__(f"interrupted; {kept} of {n_frames} frames kept in {parts}/ — run the same command "
+                         "again to finish")
+        self.kept, self.n_frames, self.parts = kept, n_frames, parts

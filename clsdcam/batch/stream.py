@@ -6,7 +6,8 @@ cube x̂_{i−1} moved by the drift seen between x̂_{i−2} and x̂_{i−1} (th
 and stops by the solver's rule (``Settings.iters`` / ``Settings.tol``). Frame i+1 is read by a
 reader thread and cube i−1 written by a writer thread while frame i is solved, so only about
 three frames are in memory whatever the stream's length. A frame's failure is recorded in its
-part (:mod:`clsdcam.batch.parts`) and the stream goes on.
+part (:mod:`clsdcam.batch.parts`) and the stream goes on; a Ctrl-C, even one the solver turned
+into its stop reason "interrupted", stops the stream (that frame is not recorded).
 
 Solver cache. A process builds its solver (model, PSF transfer function, FFT plans, device
 buffers, Lipschitz constant) once per (calibration, preprocessing, settings, backend, device,
@@ -109,6 +110,8 @@ def _solve_frame(spec: BatchSpec, i: int, frame, error: str | None, x0):
     except Exception as exc:  # noqa: BLE001 - a frame's failure is recorded, the stream goes on
         record["error"] = failure_text(exc)
         return record, None, None
+    if result.stop_reason == "interrupted":  # the solver stopped on Ctrl-C: the batch stops, the frame is not done
+        raise KeyboardInterrupt
     record.update(iterations=result.iterations, stop_reason=result.stop_reason, seconds=time.perf_counter() - start)
     return record, result.cube, wavelengths
 

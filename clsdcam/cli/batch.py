@@ -3,17 +3,26 @@ from __future__ import annotations
 
 import sys
 
-from .options import add_preprocessing_options, add_solver_options, integer_at_least, positive_int
+from .options import add_preprocessing_options, add_solver_options, examples, integer_at_least, positive_int
+
+EXAMPLES = examples(
+    "clsdcam batch video/frames.npy --calibration video/calibration.h5 -o cubes.h5 --workers 2",
+    "clsdcam batch frames/ --calibration calibration.mat --reference-preprocess -o run.h5 --workers 0 --tol 1e-4",
+    "clsdcam batch /shared/frames.h5 --calibration /shared/cal.mat -o /shared/cubes.h5 --scheduler tcp://host:8786",
+    "# after Ctrl-C or a crash, the same command computes only the frames still missing")
 
 
 def add_parser(subparsers):
-    p = subparsers.add_parser("batch", help="reconstruct many frames (warm-started streams on Dask workers)")
+    p = subparsers.add_parser("batch", help="reconstruct many frames (warm-started streams on Dask workers)",
+                              description="Reconstruct many frames: warm-started streams, on Dask workers; a "
+                                          "re-run computes only the frames still missing.",
+                              epilog=EXAMPLES)
     p.add_argument("frames", nargs="+", help="frame files, a folder of them, or one stack (.npy/.h5 (N,H,W), TIFF)")
-    p.add_argument("--calibration", required=True)
+    p.add_argument("--calibration", required=True, help="calibration.mat (psf, mask, wavs) or our .h5")
     p.add_argument("-o", "--output", required=True, help="OUT.h5 (parts in OUT.h5.parts/)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=integer_at_least(0), default=1,
-                       help="worker processes of an embedded Dask LocalCluster (0: one in-process stream; default 1)")
+                       help="worker processes of an embedded Dask LocalCluster (0: one in-process stream)")
     where.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
     p.add_argument("--chunk", type=positive_int, default=None,
                    help="frames per task (default: missing frames / (2·workers), at most 64)")
@@ -24,6 +33,24 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
+    """Exit code: 0, 1 if some frame failed, 130 after a Ctrl-C that kept some frames (said on stderr)."""
+    from ..batch import BatchInterrupted
+
+    try:
+        summary = _run_batch(args)
+    except BatchInterrupted as stop:
+        print(f"clsdcam: {stop}", file=sys.stderr)
+        return 130
+    rate = summary.computed_frames / summary.seconds if summary.seconds else 0.0
+    print(f"wrote {args.output}: {summary.n_frames} frames ({summary.computed_frames} computed now, "
+          f"{rate:.2f} frames/s), {len(summary.failed)} failed")
+    for index, reason in summary.failed:
+        print(f"  frame {index}: {reason}", file=sys.stderr)
+    return summary.exit_code
+
+
+def _run_batch(args):
+    """run_batch as the options ask, with a progress bar unless --quiet."""
     from ..batch import BatchSpec, run_batch
     from .options import preprocessing_from, settings_from
 
@@ -32,18 +59,12 @@ def run(args) -> int:
                      path=args.path, warm_start=not args.no_warm_start)
     bars = []
     try:
-        summary = run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,
-                            overwrite=args.overwrite, progress=lambda k: bars and bars[0].update(k),
-                            on_plan=None if args.quiet else lambda n, missing: bars.append(_bar(n, n - missing)))
+        return run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,
+                         overwrite=args.overwrite, progress=lambda k: bars and bars[0].update(k),
+                         on_plan=None if args.quiet else lambda n, missing: bars.append(_bar(n, n - missing)))
     finally:
         for bar in bars:
             bar.close()
-    rate = summary.computed_frames / summary.seconds if summary.seconds else 0.0
-    print(f"wrote {args.output}: {summary.n_frames} frames ({summary.computed_frames} computed now, "
-          f"{rate:.2f} frames/s), {len(summary.failed)} failed")
-    for index, reason in summary.failed:
-        print(f"  frame {index}: {reason}", file=sys.stderr)
-    return summary.exit_code
 
 
 def _bar(total: int, done: int):
