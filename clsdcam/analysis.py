@@ -22,6 +22,7 @@ import numpy as np
 
 from . import sim
 from .calibration import Calibration
+from .calibrate.raw import bin_pixels, shift_image
 from .metrics import psnr, spectral_angle
 from .sim.scenes import SOURCE_FWHM, source_cube, source_lines, source_positions
 from .solver import reconstruct
@@ -61,12 +62,6 @@ def binning_factor(shape, target=sim.DEFAULT_SHAPE) -> int:
     return max(1, int(np.ceil(max(s / t for s, t in zip(shape, target)))))
 
 
-def bin_pixels(image: np.ndarray, factor: int) -> np.ndarray:
-    """Mean over f × f blocks (the ragged edge dropped), as a sensor binning its pixels."""
-    h, w = (n // factor * factor for n in image.shape)
-    return image[:h, :w].reshape(h // factor, factor, w // factor, factor).mean(axis=(1, 3))
-
-
 def measured_psf(raw: np.ndarray, target=sim.DEFAULT_SHAPE) -> tuple[np.ndarray, int]:
     """A raw PSF frame made comparable with the simulated one: max(raw − dark, 0), binned by
     :func:`binning_factor` to the prototype's 320 × 448 scale. Returns (psf, f)."""
@@ -78,11 +73,7 @@ def measured_psf(raw: np.ndarray, target=sim.DEFAULT_SHAPE) -> tuple[np.ndarray,
 # ---- columns of A and local condition numbers ---------------------------------------------------
 def point_image(psf: np.ndarray, y: int, x: int) -> np.ndarray:
     """h(p − (y, x) + c): the sensor image of a unit point at (y, x), c = (H//2, W//2); zero fill."""
-    h, w = psf.shape
-    dy, dx = y - h // 2, x - w // 2
-    out = np.zeros(psf.shape)
-    out[max(dy, 0):h + min(dy, 0), max(dx, 0):w + min(dx, 0)] = psf[max(-dy, 0):h - max(dy, 0), max(-dx, 0):w - max(dx, 0)]
-    return out
+    return shift_image(np.asarray(psf, np.float64), (y - psf.shape[0] // 2, x - psf.shape[1] // 2))
 
 
 def columns(psf, filters, voxels) -> np.ndarray:

@@ -3,7 +3,10 @@
 Layouts read:
 - the paper's ``calibration.mat``: ``psf`` (H,W), ``mask`` (H,W,K), ``wavs`` (1,K) or (K,1),
   in MATLAB v5 (scipy.io) or v7.3 (HDF5; MATLAB stores arrays transposed, undone here);
-- our HDF5: ``psf`` (H,W), ``filters`` (K,H,W), ``wavelengths`` (K,).
+- our HDF5: ``psf`` (H,W), ``filters`` (K,H,W), ``wavelengths`` (K,); optionally ``dead_pixels`` (H,W) bool
+  (pixels left out of every reconstruction, from ``clsdcam calibrate filters``) and a group ``raw``: the steps that
+  turned raw frames into the calibration's size (:mod:`clsdcam.calibrate.raw`), which :func:`prepare` applies to a
+  measurement of the recorded raw size.
 Inside, filters are (K,H,W) (docs/conventions.md); the file's (H,W,K) is converted at load time.
 
 Preprocessing (each step an option, the reference set in :meth:`Preprocessing.reference`):
@@ -18,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .calibrate.raw import RawSteps, apply_raw_steps, read_record, write_record
 from .errors import InputError, shape_text
 from .io import MAX_DATASET_BYTES, as_real_array, atomic_output, existing_file, first_line, read_dataset, require_finite
 
@@ -32,6 +36,8 @@ class Calibration:
     ``scale``: the factor the model A was divided by when the PSF and filters were normalised
     (:func:`preprocess`); a cube solved on this calibration, divided by it, is in the units of the
     calibration as it was measured (normalising conditions the solve, it does not change the units).
+    ``raw``: the raw steps of the PSF frames (:class:`clsdcam.calibrate.raw.RawSteps`), None if unknown;
+    ``dead_pixels``: (H,W) bool, pixels whose filter function is not to be trusted (None: none).
     """
 
     psf: np.ndarray
@@ -39,6 +45,8 @@ class Calibration:
     wavelengths: np.ndarray
     source: str = "memory"
     scale: float = 1.0
+    raw: RawSteps | None = None
+    dead_pixels: np.ndarray | None = None
 
     def __post_init__(self):
         self.psf = require_finite(as_real_array(self.psf, f"{self.source}: psf"), f"{self.source}: psf")
@@ -60,6 +68,11 @@ class Calibration:
             raise InputError(f"{src}: the psf is all zeros")
         if not np.any(filters):
             raise InputError(f"{src}: the filters are all zeros")
+        if self.dead_pixels is not None:
+            self.dead_pixels = np.asarray(self.dead_pixels) != 0
+            if self.dead_pixels.shape != psf.shape:
+                raise InputError(f"{src}: dead_pixels {shape_text(self.dead_pixels.shape)} do not match psf "
+                                 f"{shape_text(psf.shape)}")
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -73,8 +86,8 @@ class Calibration:
     def load(cls, path) -> "Calibration":
         """Read the paper's ``calibration.mat`` (v5 or v7.3) or our HDF5 layout."""
         path = existing_file(path, "calibration")
-        arrays = _read_mat_v5(path) if _is_mat_v5(path) else _read_hdf5_calibration(path)
-        return cls(*arrays[:3], source=str(path), scale=arrays[3] if len(arrays) > 3 else 1.0)
+        psf, filters, wavelengths, *extras = _read_mat_v5(path) if _is_mat_v5(path) else _read_hdf5_calibration(path)
+        return cls(psf, filters, wavelengths, source=str(path), **(extras[0] if extras else {}))
 
     def save(self, path) -> Path:
         """Write our HDF5 layout atomically."""
@@ -87,6 +100,10 @@ class Calibration:
             f["wavelengths"] = self.wavelengths.astype(np.float64)
             f.attrs["source"] = self.source
             f.attrs["units_scale"] = self.scale
+            if self.dead_pixels is not None:
+                f["dead_pixels"] = self.dead_pixels
+            if self.raw is not None:
+                write_record(f, self.raw)
         return path
 
 
@@ -117,12 +134,18 @@ def _read_hdf5_calibration(path: Path):
         with h5py.File(path, "r") as f:
             if "filters" in f:
                 return (*(read_dataset(f, key, f"calibration {path}") for key in ("psf", "filters", "wavelengths")),
-                        float(f.attrs.get("units_scale", 1.0)))
+                        _our_extras(f, f"calibration {path}"))
             contents = {key: read_dataset(f, key, f"calibration {path}").T for key in ("psf", "mask", "wavs") if key in f}
             contents["__keys__"] = list(f.keys())
     except (OSError, ValueError, TypeError, KeyError, RuntimeError, MemoryError) as exc:
         raise InputError(f"calibration {path}: neither a MATLAB nor an HDF5 file ({first_line(exc)})") from None
     return _paper_layout(path, contents)
+
+
+def _our_extras(f, name: str) -> dict:
+    """Calibration's optional fields from our layout: scale, dead_pixels, raw."""
+    dead = read_dataset(f, "dead_pixels", name) if "dead_pixels" in f else None
+    return {"scale": float(f.attrs.get("units_scale", 1.0)), "dead_pixels": dead, "raw": read_record(f, name)}
 
 
 def _paper_layout(path, contents: dict):
@@ -196,12 +219,15 @@ def preprocess(calibration: Calibration, measurement: np.ndarray, options: Prepr
     """Apply ``options`` to a calibration and its measurement; returns both, new arrays.
 
     A measurement whose shape differs from the calibration is rejected unless a crop is given,
-    in which case both must contain the crop window (the raw frame may be larger).
+    in which case both must contain the crop window (the raw frame may be larger). The calibration's own
+    ``dead_pixels`` are excluded with those of ``options`` (the result has them applied: its ``dead_pixels``
+    is None).
     """
     psf, filters, b = calibration.psf, calibration.filters, np.asarray(measurement, np.float64)
+    dead = np.zeros(psf.shape, bool) if calibration.dead_pixels is None else calibration.dead_pixels
     if options.crop is not None:
         window = _crop_window(options.crop, calibration, b)
-        psf, filters, b = psf[window], filters[(slice(None),) + window], b[window]
+        psf, filters, b, dead = psf[window], filters[(slice(None),) + window], b[window], dead[window]
     elif b.shape != psf.shape:
         raise InputError(f"measurement {shape_text(b.shape)} does not match calibration {shape_text(psf.shape)} "
                          f"({calibration.source}); give --crop Y0:Y1,X0:X1")
@@ -212,7 +238,7 @@ def preprocess(calibration: Calibration, measurement: np.ndarray, options: Prepr
         filters, wavelengths = filters[:-1], wavelengths[:-1]
     if options.zero_defect:
         filters, b = zero_defect_block(filters, b)
-    filters, b = exclude_pixels(filters, b, excluded_pixels(b, options))
+    filters, b = exclude_pixels(filters, b, excluded_pixels(b, options) | dead)
     scale = calibration.scale
     if options.normalize_psf:
         scale *= np.linalg.norm(psf)
@@ -220,21 +246,36 @@ def preprocess(calibration: Calibration, measurement: np.ndarray, options: Prepr
     if options.normalize_filters:
         scale *= np.max(filters)
         filters = filters / np.max(filters)
-    out = replace(calibration, psf=psf, filters=filters, wavelengths=wavelengths, scale=float(scale))
+    out = replace(calibration, psf=psf, filters=filters, wavelengths=wavelengths, scale=float(scale), dead_pixels=None)
     return out, b
 
 
 def prepare(measurement, calibration, options: "Preprocessing | None" = None):
     """(calibration, measurement) ready to solve, the same way for the API and the command line: either given
     as a file path (loaded) or as an object/array, then :func:`preprocess` with ``options`` (default:
-    :class:`Preprocessing` ()). The calibration's ``scale`` brings solved cubes back to its units."""
+    :class:`Preprocessing` ()). The calibration's ``scale`` brings solved cubes back to its units.
+
+    A measurement of the calibration's recorded raw size (``calibration.raw``) first gets the raw steps the PSF
+    frames got (:func:`clsdcam.calibrate.raw.apply_raw_steps`: dark, crop, bin, centring shift); the returned
+    calibration's ``source`` then says so ("…; raw steps applied to the measurement: …"), and with it the
+    ``calibration`` attribute of a cube solved on it."""
     from .io import load_measurement
 
     if not isinstance(calibration, Calibration):
         calibration = Calibration.load(calibration)
     if isinstance(measurement, (str, Path)):
         measurement = load_measurement(measurement)
+    calibration, measurement = with_raw_steps(calibration, measurement)
     return preprocess(calibration, measurement, options or Preprocessing())
+
+
+def with_raw_steps(calibration: Calibration, measurement):
+    """(calibration, measurement) with the recorded raw steps applied when the measurement has the raw size."""
+    raw = calibration.raw
+    if raw is None or np.shape(measurement) != tuple(raw.shape):
+        return calibration, measurement
+    source = f"{calibration.source}; raw steps applied to the measurement: {raw.describe()}"
+    return replace(calibration, source=source), apply_raw_steps(raw, measurement)
 
 
 def _crop_window(crop, calibration: Calibration, b: np.ndarray) -> tuple[slice, slice]:

@@ -9,18 +9,27 @@ def add_parser(subparsers):
     p = subparsers.add_parser("simulate", help="simulate a camera, a scene and its measurement", epilog=examples(
         "clsdcam simulate sim/ --scene target",
         "clsdcam simulate small/ --scene leds --size 64x96 --bands 16 --noise 1e-4",
-        "clsdcam simulate video/ --scene leds --frames 16"))
+        "clsdcam simulate video/ --scene leds --frames 16",
+        "clsdcam simulate lab/ --sweep --size 48x64 --bands 16   # + a monochromator sweep to calibrate from"))
     p.add_argument("outdir")
     p.add_argument("--frames", type=positive_int, default=None,
                    help="write a video of N frames of the scene drifting (frames.npy, truth.h5)")
+    p.add_argument("--sweep", action="store_true",
+                   help="also write a monochromator sweep of the filter array (sweep/, dark/, sweep_wavelengths.csv, "
+                        "power.csv, true_filters.h5, psf_calibration.h5) for 'clsdcam calibrate filters'; the "
+                        "camera's filters are then the true transmissions integrated over each band")
     add_simulation_options(p)
 
 
 def run(args) -> int:
     from ..sim import simulate, write_simulation
 
+    if args.frames and args.sweep:
+        raise InputError("--sweep and --frames: choose one")
     if args.frames:
         return _simulate_video(args)
+    if args.sweep:
+        return _simulate_sweep(args)
     sim = simulate(**simulation_kwargs(args))
     paths = write_simulation(args.outdir, sim)
     print(f"simulated scene {sim.scene!r} ({shape_text(sim.truth.shape)}): " +
@@ -34,6 +43,17 @@ def _simulate_video(args) -> int:
     calibration, frames, truth = simulate_video(args.scene, args.frames, args.size, args.bands, args.seed)
     paths = write_video(args.outdir, calibration, frames, truth)
     print(f"simulated {args.frames} frames of {args.scene!r}: " + ", ".join(str(p) for p in paths.values()))
+    return 0
+
+
+def _simulate_sweep(args) -> int:
+    from ..sim.sweep import simulate_with_sweep, write_sweep
+
+    sim, sweep = simulate_with_sweep(**simulation_kwargs(args))
+    paths = write_sweep(args.outdir, sim, sweep)
+    print(f"simulated scene {sim.scene!r} ({shape_text(sim.truth.shape)}) and a sweep of {len(sweep.wavelengths)} "
+          f"frames {sweep.wavelengths[0]:g}–{sweep.wavelengths[-1]:g} nm (power: {sweep.power_source}): " +
+          ", ".join(str(p) for p in paths.values()))
     return 0
 
 
