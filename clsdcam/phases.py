@@ -55,9 +55,11 @@ def held(shapes: np.ndarray, basis: np.ndarray) -> float:
 class Phases:
     """Runs one solve's FISTA loop through its spaces (see the module docstring)."""
 
-    def __init__(self, solver, loop, tracker: Tracker, priors: list):
+    def __init__(self, solver, loop, tracker: Tracker, priors: list, iters: int, should_stop=None):
         self.solver = solver
         self.settings = solver.settings
+        self.iters = iters                          # this solve's budget
+        self.should_stop = should_stop              # FISTA's extra stopping rule (e.g. a fit reached), or None
         self.backend = solver.backend
         self.loop = loop
         self.tracker = tracker
@@ -82,7 +84,7 @@ class Phases:
             return "interrupted", self.problem
 
     def _run_phases(self, warm_started: bool, basis, core: int) -> str:
-        iters, loop = self.settings.iters, self.loop
+        iters, loop = self.iters, self.loop
         if self._subspace_allowed() and basis is not None:
             with held_interrupt():
                 self.problem = self._enter_basis(self.problem, basis, max(core, 1), "carried from the previous solve")
@@ -106,7 +108,7 @@ class Phases:
 
     def _warm_up(self) -> str | None:
         """Band space for WARMUP iterations, then until consecutive bases settle; a stop reason or None."""
-        iters, loop = self.settings.iters, self.loop
+        iters, loop = self.iters, self.loop
         reason = self._run(self.problem, min(WARMUP, iters))
         if self.settings.rank:            # the user chose the basis's size: no waiting for the spectra
             return reason
@@ -136,12 +138,12 @@ class Phases:
         loop, pending = self.loop, [prior for prior in self.priors if prior.auto]
         if pending and loop.iterations < AUTO_AT <= loop.iterations + iters:
             first = AUTO_AT - loop.iterations
-            reason = loop.run(problem.gradient_step, problem.prox, first, self.tracker.on(problem))
+            reason = loop.run(problem.gradient_step, problem.prox, first, self.tracker.on(problem), self.should_stop)
             if reason:
                 return reason
             self._choose_weights(problem, pending)
             iters -= first
-        return loop.run(problem.gradient_step, problem.prox, iters, self.tracker.on(problem))
+        return loop.run(problem.gradient_step, problem.prox, iters, self.tracker.on(problem), self.should_stop)
 
     def _choose_weights(self, problem: Problem, pending: list):
         """Auto weights from the noise σ̂ of the current residual (b / max|b|: σ̂ relative to max|b|)."""

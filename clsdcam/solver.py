@@ -82,13 +82,17 @@ class Solver:
         self.b = None          # the measurement being solved, divided by max|b|, on the device
 
     def solve(self, measurement: np.ndarray, x0: np.ndarray | None = None,
-              progress: Callable[[dict], None] | None = None, snapshots=(), state: SolverState | None = None) -> Result:
+              progress: Callable[[dict], None] | None = None, snapshots=(), state: SolverState | None = None,
+              iters: int | None = None, stop_at_fit: float | None = None) -> Result:
         """Reconstruct one (H, W) measurement.
 
         x0 is an optional warm start in data units: a (K, H, W) cube or a whole field (``Result.full_field``);
         ``state`` (a previous ``Result.state`` of this solver, e.g. the last frame of a video) starts from its
         field instead and carries its basis, rank, step and weights (:mod:`clsdcam.state`); ``snapshots`` lists
-        iterations at which a copy of the cube is kept in ``Result.snapshots`` (e.g. to measure accuracy).
+        iterations at which a copy of the cube is kept in ``Result.snapshots`` (e.g. to measure accuracy);
+        ``iters`` overrides ``Settings.iters`` for this solve (a stream's cold and warm frames); ``stop_at_fit``
+        stops it (reason "fit") once ‖Ay − b‖/‖b‖ at FISTA's point y is at most that (e.g. the previous frame's
+        fit: a frame that changed little stops early, one that changed more gets the iterations).
         """
         b = self._checked(measurement)
         scale = float(np.max(np.abs(b)))
@@ -108,18 +112,26 @@ class Solver:
         off = [row.name for row in PRIORS if row.name not in {p.name for p in priors}]
         tracker.report.lines += [line for line in (field_line(self.geometry), self._bands_line(), terms_line(off))
                                  if line]
-        phases = Phases(self, loop, tracker, priors)
+        phases = Phases(self, loop, tracker, priors, iters or s.iters, self._fit_rule(loop, stop_at_fit))
         reason, problem = phases.run(problem, warm_started=x0 is not None or state is not None,
                                      basis=state.basis if state else None, core=state.core if state else 0)
         tracker.report.lines += [line for line in (phases.refreshes_line(),) if line]
         field = problem.solution(loop.x)
         out = self._result(field, scale, loop.history, reason, priors, loop.step, tracker)
         out.attrs.update({f"{p.name}_chosen": p.relative for p in priors}, **phases.chosen)
-        out.attrs["relative_residual"] = self._relative_residual(problem, loop.x)
+        out.attrs["relative_residual"] = fit = self._relative_residual(problem, loop.x)
         out.snapshots = tracker.kept
         out.state = SolverState(be.scale(scale / self.calibration.scale, field), phases.basis(), phases.core(),
-                                phases.step_factor(), {p.name: p.relative for p in priors})
+                                phases.step_factor(), {p.name: p.relative for p in priors}, fit)
         return out
+
+    def _fit_rule(self, loop: Fista, fit: float | None):
+        """FISTA's should_stop for ``stop_at_fit``: "fit" once the record's data term ½‖Ay − b‖² is at most
+        ½ fit²·‖b‖² (None: no such rule)."""
+        if not fit:
+            return None
+        target = 0.5 * fit ** 2 * self.backend.vdot(self.b, self.b)
+        return lambda: "fit" if loop.history and loop.history[-1]["data"] <= target else None
 
     def _relative_residual(self, problem: Problem, x) -> float:
         """‖Av − b‖/‖b‖ of the final iterate: how much of the measurement the cube leaves unexplained (noise,

@@ -16,13 +16,15 @@ import numpy as np
 @dataclass
 class SolverState:
     """The field (a backend array, in the calibration's units), the basis (K × r) or None for band space, the
-    core rank, the step times the Lipschitz constant of its space, and the priors' relative weights."""
+    core rank, the step times the Lipschitz constant of its space, the priors' relative weights, and the fit
+    ‖Av − b‖/‖b‖ the solve reached (what the next frame's solve may stop at: ``Solver.solve(stop_at_fit=…)``)."""
 
     field: Any
     basis: np.ndarray | None
     core: int
     step_factor: float
     weights: dict[str, float] = field(default_factory=dict)
+    fit: float = 0.0
 
     def apply_weights(self, priors: list) -> None:
         """Give the priors the weights this state's solve used (auto ones included: no new estimate)."""

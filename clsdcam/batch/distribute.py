@@ -30,7 +30,7 @@ from ..provenance import provenance
 from .frames import FrameSource
 from .parts import assemble, chunks, claim, finished_parts, missing_frames, part_path, parts_dir
 from .spec import BatchInterrupted, BatchSpec, BatchSummary
-from .stream import failure_text, run_stream, solve_chunk
+from .stream import Carried, failure_text, run_stream, solve_chunk
 
 
 def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None = None, chunk: int | None = None,
@@ -115,10 +115,10 @@ class _Progress:
 
 def _run_serial(spec, parts, bounds, progress):
     """The chunks in this process, one after another; a chunk that follows on its predecessor continues its stream."""
-    past, last = (None, None), None
+    carried, last = Carried(), None
     for s, e in bounds:
-        _, past = run_stream(spec, s, e, part_path(parts, s, e), lambda i: progress([i]),
-                             past if s == last else (None, None))
+        _, carried = run_stream(spec, s, e, part_path(parts, s, e), lambda i: progress([i]),
+                                carried if s == last else Carried())
         last = e
 
 

@@ -1,45 +1,80 @@
-"""Motion prediction for warm starts: the drift between two cubes by phase correlation.
+"""Motion prediction for warm starts: the drift between two cubes, and the next frame's start moved by it.
 
-A scene moving at constant velocity shows in x̂_{i−1} moved by the drift d seen between
-x̂_{i−2} and x̂_{i−1}; so frame i starts from x̂_{i−1} shifted by d. With s = Σ_k x̂_k the band
-sums, the phase correlation
-
-    c = ℱ⁻¹[ℱs_{i−1}·conj(ℱs_{i−2}) / |ℱs_{i−1}·conj(ℱs_{i−2})|]
-
-peaks at d (a translation is a phase ramp); a parabola through the peak and its two
-neighbours on each axis refines it to sub-pixel, p + ½(c₋ − c₊)/(c₋ − 2c₀ + c₊).
+A scene moving at constant velocity shows in x̂_{i−1} moved by the drift d seen between x̂_{i−2} and
+x̂_{i−1}; so frame i starts from frame i−1's solution shifted by d. The drift is read from the band sums
+s = Σ_k x̂_k by phase correlation, c = ℱ⁻¹[ℱs_{i−1}·conj(ℱs_{i−2}) / |ℱs_{i−1}·conj(ℱs_{i−2})|], whose peak
+is at d (a translation is a phase ramp), to 1/UPSAMPLE px by the matrix-multiply DFT upsampling of
+Guizar-Sicairos et al. (Opt. Lett. 2008) — scikit-image's ``phase_cross_correlation``. The shift itself is a
+phase ramp too, x(p − d) = ℱ⁻¹[ℱx · e^{−2πi⟨f, d⟩}] (``scipy.ndimage.fourier_shift``): exact for any
+sub-pixel d on band-limited content, where bilinear interpolation would blur the start by up to half a pixel
+(and barely move it: a 0.6 px drift read to ±0.5 px by a parabola through the correlation peak is lost in
+that blur). The transform is periodic: content leaving one side enters the other, which the solver's field
+(zero-padded to twice the sensor) keeps away from the sensor window; negative ringing is clipped at 0.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+UPSAMPLE = 50        # the drift is read to 1/UPSAMPLE px
+MIN_SHIFT = 0.05     # px: below this the start is not moved
 
-def predict(before, previous, min_shift: float = 0.05):
-    """Warm start for frame i from x̂_{i−2} (``before``) and x̂_{i−1} (``previous``), assuming constant velocity.
 
-    The drift d is the peak of the phase correlation of the band sums s = Σ_k x̂_k,
-    c = ℱ⁻¹[ℱs_{i−1}·conj(ℱs_{i−2}) / |ℱs_{i−1}·conj(ℱs_{i−2})|], refined to sub-pixel by a parabola
-    through the peak and its two neighbours on each axis; x0 = x̂_{i−1} shifted by d (bilinear,
-    zero fill, clipped at 0). Without ``before``, or for |d| < ``min_shift`` px, x0 = x̂_{i−1}.
-    """
-    if previous is None or before is None:
-        return previous
+def drift(before: np.ndarray, previous: np.ndarray) -> tuple[float, float]:
+    """(dy, dx) in px: the translation that takes the band sums of ``before`` (K, H, W) to ``previous``'s."""
+    from skimage.registration import phase_cross_correlation
+
+    shift, _, _ = phase_cross_correlation(np.sum(previous, axis=0, dtype=np.float64),
+                                          np.sum(before, axis=0, dtype=np.float64),
+                                          upsample_factor=UPSAMPLE, normalization="phase")
+    return float(shift[0]), float(shift[1])
+
+
+def phase_shift(planes: np.ndarray, d: tuple[float, float]) -> np.ndarray:
+    """``planes`` (N, H, W) moved by d = (dy, dx) px: ℱ⁻¹[ℱx · e^{−2πi⟨f, d⟩}] per plane (float32)."""
+    import scipy.fft
     import scipy.ndimage as ndi
 
-    drift = _drift(before, previous)
-    if np.hypot(*drift) < min_shift:
+    h, w = planes.shape[-2:]
+    spectrum = scipy.fft.rfft2(np.asarray(planes, np.float32), workers=-1)
+    return scipy.fft.irfft2(ndi.fourier_shift(spectrum, (0, *d), n=w), s=(h, w), workers=-1).astype(np.float32)
+
+
+def shifted(cube: np.ndarray, d: tuple[float, float]) -> np.ndarray:
+    """A non-negative ``cube`` (K, H, W) moved by d px, its ringing clipped at 0."""
+    return np.maximum(phase_shift(cube, d), 0)
+
+
+def predict(before, previous, min_shift: float = MIN_SHIFT):
+    """Warm start for frame i from x̂_{i−2} (``before``) and x̂_{i−1} (``previous``), assuming constant
+    velocity: ``previous`` moved by their drift; ``previous`` itself without ``before`` or when the drift is
+    under ``min_shift`` px."""
+    if previous is None or before is None:
         return previous
-    return np.maximum(ndi.shift(previous, (0, *drift), order=1), 0).astype(np.float32)
+    d = drift(before, previous)
+    return previous if np.hypot(*d) < min_shift else shifted(previous, d)
 
 
-def _drift(before, previous) -> list[float]:
-    """(dy, dx) in px, each in (−n/2, n/2]: the sub-pixel peak of the band sums' phase correlation."""
-    cross = np.fft.fft2(previous.sum(0)) * np.conj(np.fft.fft2(before.sum(0)))
-    c = np.fft.ifft2(cross / np.maximum(np.abs(cross), 1e-12 * np.abs(cross).max())).real
-    peak = np.unravel_index(np.argmax(c), c.shape)
-    drift = []
-    for axis, n in enumerate(c.shape):
-        lo, mid, hi = (c[tuple((p + (k if a == axis else 0)) % c.shape[a] for a, p in enumerate(peak))] for k in (-1, 0, 1))
-        d = peak[axis] + (0.5 * (lo - hi) / (lo - 2 * mid + hi) if lo - 2 * mid + hi else 0.0)
-        drift.append(d - n if d > n / 2 else d)
-    return drift
+def predict_state(before, previous, state, backend, min_shift: float = MIN_SHIFT):
+    """A solver state (:class:`clsdcam.state.SolverState`) for frame i: frame i−1's, its whole field moved by
+    the drift between the cubes x̂_{i−2} (``before``) and x̂_{i−1} (``previous``); as it is when the drift is
+    unknown or under ``min_shift`` px."""
+    if before is None or previous is None:
+        return state
+    d = drift(before, previous)
+    if np.hypot(*d) < min_shift:
+        return state
+    return replace(state, field=backend.to_device(moved_field(backend.to_host(state.field), state.basis, d)))
+
+
+def moved_field(field: np.ndarray, basis: np.ndarray | None, d: tuple[float, float]) -> np.ndarray:
+    """``field`` (K, Hp, Wp) moved by d; with a spectral basis B (K × r, orthonormal), its coefficients
+    c = Bᵀv are moved and expanded, B·shift(c): r planes transformed instead of K, and what the next solve
+    starts from (it enters B at once, c = Bᵀ(B·shift(c)) = shift(c); no clipping, which would leave B)."""
+    if basis is None:
+        return shifted(field, d)
+    k, hp, wp = field.shape
+    coefficients = (basis.T @ field.reshape(k, -1)).reshape(-1, hp, wp)
+    moved = phase_shift(coefficients, d)
+    return (basis @ moved.reshape(moved.shape[0], -1)).reshape(k, hp, wp).astype(np.float32)

@@ -3,7 +3,7 @@
 Parts. Chunk [s, e) is written into a temporary file renamed to
 ``OUT.h5.parts/chunk-SSSSSS-EEEEEE.h5``: a part is whole or absent. It holds ``cubes``
 (e − s, K, H, W) (NaN where a frame failed), ``wavelengths`` and per-frame ``index``,
-``iterations``, ``stop_reason``, ``seconds``, ``error``.
+``iterations``, ``stop_reason``, ``seconds``, ``error``, ``warm`` (started from the previous frame's state).
 
 Resume. A frame is done when some part covers it; a re-run computes only the others (any
 chunk size, any worker count), cut into contiguous chunks, after removing the temporaries
@@ -16,7 +16,7 @@ as numbers), the same on any Python or NumPy.
 Output. ``OUT.h5`` holds ``cubes`` (N,K,H,W), an HDF5 virtual dataset over the parts (NaN
 where a frame failed), with dimension scales ``frame``, ``wavelength`` (nm), ``y``, ``x`` as
 single cubes have them (xarray's h5netcdf engine reads them as dims and coordinates), per-frame
-``iterations``, ``stop_reason``, ``seconds``, ``error`` (on the ``frame`` scale), and as
+``iterations``, ``stop_reason``, ``seconds``, ``error``, ``warm`` (on the ``frame`` scale), and as
 attributes the provenance (:mod:`clsdcam.provenance`) and the batch's settings; it is
 rebuilt, atomically, at the end of every run.
 """
@@ -37,6 +37,7 @@ from .spec import BatchSpec, BatchSummary
 
 MAX_CHUNK = 64          # default chunk cap: bounds the work a crash loses and keeps tasks balanced
 TEXT_KEYS = ("stop_reason", "error")
+NUMBER_KEYS = ("index", "iterations", "seconds", "warm")
 _PART = re.compile(r"chunk-(\d+)-(\d+)\.h5$")
 _TEMPORARY = re.compile(r"\.chunk-\d+-\d+\.h5\.[0-9a-f]+\.h5")  # atomic_output's name for a part being written
 
@@ -56,9 +57,11 @@ def chunk_bounds(n_frames: int, chunk: int, first: int = 0) -> list[tuple[int, i
 
 
 def chunks(missing: list[int], chunk: int | None, slots: int) -> list[tuple[int, int]]:
-    """Contiguous runs of the missing frames, cut into chunks of ``chunk`` frames
-    (default ⌈missing / (2·slots)⌉, at most MAX_CHUNK)."""
-    chunk = chunk or min(MAX_CHUNK, max(1, math.ceil(len(missing) / (2 * slots))))
+    """Contiguous runs of the missing frames, cut into chunks of ``chunk`` frames, by default
+    min(MAX_CHUNK, ⌈missing / slots⌉): one chunk per worker slot, so a short batch is cut no more than its
+    workers need (each chunk's first frame is a cold start: cutting finer buys no parallelism and costs
+    warm starts), and a long one into MAX_CHUNK-frame runs (what a crash loses; balance across workers)."""
+    chunk = chunk or min(MAX_CHUNK, max(1, math.ceil(len(missing) / slots)))
     runs, first = [], missing[0]
     for a, b in zip(missing, missing[1:] + [None]):
         if b != a + 1:
@@ -98,7 +101,7 @@ def _plain(value):
 def stamp(spec: BatchSpec, n: int) -> dict:
     """The contents of ``batch.json``: the fingerprint of what decides the cubes, and the settings as text."""
     what = {"frames": spec.frames, "calibration": spec.calibration, "preprocessing": spec.preprocessing,
-            "settings": spec.settings, "warm_start": spec.warm_start, "n_frames": n}
+            "settings": spec.settings, "warm_start": spec.warm_start, "cold_iters": spec.cold_iters, "n_frames": n}
     return {"fingerprint": hashlib.sha256(canonical_text(what).encode()).hexdigest(), "frames": n,
             "settings": canonical_text(spec.settings), "warm_start": spec.warm_start}
 
@@ -137,11 +140,12 @@ def write_columns(out, columns: dict):
 
 
 def read_records(part: Path) -> list[dict]:
-    """The per-frame records of a part: ``index``, ``iterations``, ``seconds``, ``stop_reason``, ``error``."""
+    """The per-frame records of a part: ``index``, ``iterations``, ``seconds``, ``warm``, ``stop_reason``,
+    ``error``."""
     import h5py
 
     with h5py.File(part, "r") as f:
-        columns = {k: f[k].asstr()[...] if k in TEXT_KEYS else f[k][...] for k in ("index", "iterations", "seconds") + TEXT_KEYS}
+        columns = {k: f[k].asstr()[...] if k in TEXT_KEYS else f[k][...] for k in NUMBER_KEYS + TEXT_KEYS}
     return [dict(zip(columns, row)) for row in zip(*columns.values())]
 
 
@@ -183,7 +187,8 @@ def _gather(parts: Path, n: int):
     """(per-frame columns, the virtual layout of the parts' cubes (None: no cube anywhere), wavelengths)."""
     import h5py
 
-    per_frame = {"iterations": np.zeros(n, np.int64), "seconds": np.zeros(n), "stop_reason": [""] * n, "error": [""] * n}
+    per_frame = {"iterations": np.zeros(n, np.int64), "seconds": np.zeros(n), "warm": np.zeros(n, bool),
+                 "stop_reason": [""] * n, "error": [""] * n}
     layout, wavelengths = None, None
     for s, e, path in finished_parts(parts):
         for r in read_records(path):

@@ -8,10 +8,14 @@ from ..calibration import Preprocessing
 from ..errors import InputError
 from ..settings import Settings
 
+COLD_ITERS = 40     # a cold start's default budget: what a chunk's first frame needs to reach a cold solve's accuracy
+
 
 @dataclass(frozen=True)
 class BatchSpec:
-    """Everything a worker needs to reconstruct any chunk (picklable)."""
+    """Everything a worker needs to reconstruct any chunk (picklable). ``settings.iters`` is the budget of a
+    warm-started frame, ``cold_iters`` (None: max(COLD_ITERS, settings.iters)) that of a cold start (a chunk's
+    first frame, a frame after a failed one); without ``warm_start`` every frame gets ``settings.iters``."""
 
     frames: tuple[str, ...]
     calibration: str
@@ -22,11 +26,19 @@ class BatchSpec:
     fft: str = "auto"
     path: str = "auto"
     warm_start: bool = True
+    cold_iters: int | None = None
 
     def __post_init__(self):
         if self.preprocessing.saturation is not None:
             raise InputError("saturation masks differ from frame to frame: not available in batch (mark the "
                              "sensor's bad pixels with dead_pixels instead)")
+
+    def budget(self, warm: bool) -> int:
+        """Iterations of a frame: ``settings.iters`` when warm-started (or without warm starts at all), else the
+        cold budget."""
+        if warm or not self.warm_start:
+            return self.settings.iters
+        return self.cold_iters or max(COLD_ITERS, self.settings.iters)
 
 
 @dataclass

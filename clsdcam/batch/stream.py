@@ -1,13 +1,15 @@
 """One chunk of frames as a warm-started stream, on this process's cached solver.
 
-Stream. Frames [s, e) are one stream on one solver: frame i starts from the previous frame's
-cube x̂_{i−1} moved by the drift seen between x̂_{i−2} and x̂_{i−1} (the *warm start*, see
-:func:`clsdcam.batch.motion.predict`; none with ``warm_start=False`` or after a failed frame)
-and stops by the solver's rule (``Settings.iters`` / ``Settings.tol``). Frame i+1 is read by a
-reader thread and cube i−1 written by a writer thread while frame i is solved, so only about
-three frames are in memory whatever the stream's length. A frame's failure is recorded in its
-part (:mod:`clsdcam.batch.parts`) and the stream goes on; a Ctrl-C, even one the solver turned
-into its stop reason "interrupted", stops the stream (that frame is not recorded).
+Stream. Frames [s, e) are one stream on one solver. The first frame (and any frame after a failed
+one) is a cold start with the cold budget (``BatchSpec.budget``); every later frame is warm: it starts
+from the previous frame's solver state (:mod:`clsdcam.state`: the whole field, the spectral basis and
+rank, the step, the prior weights: no band-space warm-up, no new weight estimate), its field moved by
+the drift seen between x̂_{i−2} and x̂_{i−1} (:func:`clsdcam.batch.motion.predict_state`), and runs
+``settings.iters`` iterations. Frame i+1 is read by a reader thread and cube i−1 written by a writer
+thread while frame i is solved, so only about three frames are in memory whatever the stream's length.
+A frame's failure is recorded in its part (:mod:`clsdcam.batch.parts`) and the stream goes on cold; a
+Ctrl-C, even one the solver turned into its stop reason "interrupted", stops the stream (that frame is
+not recorded). Without ``warm_start`` every frame is a cold solve of ``settings.iters`` iterations.
 
 Solver cache. A process builds its solver (model, PSF transfer function, FFT plans, device
 buffers, Lipschitz constant) once per (calibration, preprocessing, settings, backend, device,
@@ -23,7 +25,9 @@ import functools
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -32,11 +36,28 @@ from ..errors import InputError
 from ..io import atomic_output
 from ..solver import Settings, Solver
 from .frames import FrameSource
-from .motion import predict
+from .motion import predict_state
 from .parts import read_records, write_columns, write_cube
 from .spec import BatchSpec
 
 SOLVERS_KEPT = 2  # solvers a process keeps: enough for a worker alternating between two batches
+FIT_MARGIN = 1.0  # a warm frame stops once its fit is this close to the previous frame's
+
+
+@dataclass
+class Carried:
+    """What a stream carries to its next frame: the cubes x̂_{i−2}, x̂_{i−1} (the drift) and frame i−1's solver
+    state; all None after a failed frame or at a cold start."""
+
+    before: Any = None
+    previous: Any = None
+    state: Any = None
+
+    def after(self, result) -> "Carried":
+        """What frame i leaves to frame i+1 (a failed frame, ``result`` None, leaves nothing)."""
+        if result is None:
+            return Carried()
+        return Carried(self.previous, result.cube, result.state)
 
 
 def solve_chunk(spec: BatchSpec, start: int, stop: int, part: str, report=None) -> list[dict]:
@@ -44,24 +65,24 @@ def solve_chunk(spec: BatchSpec, start: int, stop: int, part: str, report=None) 
     return run_stream(spec, start, stop, Path(part), report)[0]
 
 
-def run_stream(spec: BatchSpec, start: int, stop: int, part: Path, report=None, past=(None, None)):
-    """(records, (x̂_{stop−2}, x̂_{stop−1})): the chunk as one stream into ``part``; ``past`` = the two
-    cubes before ``start`` (None: unknown or failed); ``report(i)`` after each frame."""
+def run_stream(spec: BatchSpec, start: int, stop: int, part: Path, report=None, carried: Carried = Carried()):
+    """(records, what frame stop − 1 leaves): the chunk as one stream into ``part``, from what frame
+    start − 1 left (``carried``; a cold start by default); ``report(i)`` after each frame."""
     import h5py
 
     if part.exists():  # written by a worker that died before Dask heard of it: keep it
-        return read_records(part), (None, None)
+        return read_records(part), Carried()
     source = FrameSource(spec.frames)
     with atomic_output(part) as tmp, h5py.File(tmp, "w") as out, \
             ThreadPoolExecutor(1) as reader, ThreadPoolExecutor(1) as writer:
         out.attrs["writer"] = f"{os.uname().nodename}:{os.getpid()}"
-        records, past = _solve_frames(spec, source, range(start, stop), out, (reader, writer), report, past)
+        records, carried = _solve_frames(spec, source, range(start, stop), out, (reader, writer), report, carried)
         write_columns(out, {key: [r[key] for r in records] for key in records[0]})
-    return records, past
+    return records, carried
 
 
-def _solve_frames(spec: BatchSpec, source: FrameSource, indices: range, out, threads, report, past):
-    """Solve the frames in order, frame i+1 read ahead and cube i−1 written behind; (records, past)."""
+def _solve_frames(spec: BatchSpec, source: FrameSource, indices: range, out, threads, report, carried: Carried):
+    """Solve the frames in order, frame i+1 read ahead and cube i−1 written behind; (records, carried)."""
     reader, writer = threads
     records, pending = [], None
     upcoming = reader.submit(_read, source, indices.start)
@@ -69,18 +90,18 @@ def _solve_frames(spec: BatchSpec, source: FrameSource, indices: range, out, thr
         frame, error = upcoming.result()
         if i + 1 < indices.stop:
             upcoming = reader.submit(_read, source, i + 1)
-        record, cube, wavelengths = _solve_frame(spec, i, frame, error, predict(*past) if spec.warm_start else None)
-        past = (past[1], cube)
+        record, result, wavelengths = _solve_frame(spec, i, frame, error, carried if spec.warm_start else Carried())
+        carried = carried.after(result)
         if pending is not None:
             pending.result()
-        if cube is not None:
-            pending = writer.submit(write_cube, out, i - indices.start, len(indices), cube, wavelengths)
+        if result is not None:
+            pending = writer.submit(write_cube, out, i - indices.start, len(indices), result.cube, wavelengths)
         records.append(record)
         if report is not None:
             report(i)
     if pending is not None:
         pending.result()
-    return records, past
+    return records, carried
 
 
 def _read(source: FrameSource, i: int):
@@ -96,9 +117,11 @@ def failure_text(exc: BaseException) -> str:
     return str(exc) if isinstance(exc, InputError) else f"{type(exc).__name__}: {exc}"
 
 
-def _solve_frame(spec: BatchSpec, i: int, frame, error: str | None, x0):
-    """(record, cube, wavelengths) of frame i started from ``x0``; cube None when it failed (recorded, not raised)."""
-    record = {"index": i, "iterations": 0, "stop_reason": "failed", "seconds": 0.0, "error": error or ""}
+def _solve_frame(spec: BatchSpec, i: int, frame, error: str | None, carried: Carried):
+    """(record, result, wavelengths) of frame i, warm-started from ``carried`` when it holds a state; result None
+    when the frame failed (recorded, not raised)."""
+    record = {"index": i, "iterations": 0, "stop_reason": "failed", "seconds": 0.0, "error": error or "",
+              "warm": carried.state is not None}
     if error is not None:
         return record, None, None
     try:
@@ -106,14 +129,25 @@ def _solve_frame(spec: BatchSpec, i: int, frame, error: str | None, x0):
                                                  spec.device, spec.fft, spec.path, frame.shape)
         b = _measurement(spec.preprocessing, raw, frame)
         start = time.perf_counter()
-        result = solver.solve(b, x0=x0)
+        result = next_solve(solver, b, carried, (spec.budget(warm=False), spec.budget(warm=True)))
     except Exception as exc:  # noqa: BLE001 - a frame's failure is recorded, the stream goes on
         record["error"] = failure_text(exc)
         return record, None, None
     if result.stop_reason == "interrupted":  # the solver stopped on Ctrl-C: the batch stops, the frame is not done
         raise KeyboardInterrupt
     record.update(iterations=result.iterations, stop_reason=result.stop_reason, seconds=time.perf_counter() - start)
-    return record, result.cube, wavelengths
+    return record, result, wavelengths
+
+
+def next_solve(solver: Solver, b, carried: Carried, budgets: tuple[int, int]):
+    """Frame i's solve on ``solver``: cold (``budgets[0]`` iterations) when nothing is carried, else warm
+    (``budgets[1]``) from frame i−1's state with its field moved by the drift (:func:`predict_state`),
+    stopping once ‖Ay − b‖/‖b‖ reaches FIT_MARGIN times frame i−1's fit (a frame that changed little
+    stops early; one that changed more uses its budget)."""
+    if carried.state is None:
+        return solver.solve(b, iters=budgets[0])
+    state = predict_state(carried.before, carried.previous, carried.state, solver.backend)
+    return solver.solve(b, state=state, iters=budgets[1], stop_at_fit=FIT_MARGIN * carried.state.fit)
 
 
 def _measurement(options: Preprocessing, raw: Calibration, frame):

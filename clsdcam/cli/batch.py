@@ -5,8 +5,10 @@ import sys
 
 from .options import add_preprocessing_options, add_solver_options, examples, integer_at_least, positive_int
 
+COLD_ITERS = 40         # as clsdcam.batch.spec.COLD_ITERS (not imported: building the parser stays light)
+
 EXAMPLES = examples(
-    "clsdcam batch video/frames.npy --calibration video/calibration.h5 -o cubes.h5 --workers 2",
+    "clsdcam batch video/frames.npy --calibration video/calibration.h5 -o cubes.h5 --workers 2 --iters 10",
     "clsdcam batch frames/ --calibration calibration.mat --reference-preprocess -o run.h5 --workers 0 --tol 1e-4",
     "clsdcam batch /shared/frames.h5 --calibration /shared/cal.mat -o /shared/cubes.h5 --scheduler tcp://host:8786",
     "# after Ctrl-C or a crash, the same command computes only the frames still missing")
@@ -25,8 +27,12 @@ def add_parser(subparsers):
                        help="worker processes of an embedded Dask LocalCluster (0: one in-process stream)")
     where.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
     p.add_argument("--chunk", type=positive_int, default=None,
-                   help="frames per task (default: missing frames / (2·workers), at most 64)")
-    p.add_argument("--no-warm-start", action="store_true", help="start every frame from zero")
+                   help="frames per task (default: missing frames / workers, at most 64: each chunk's first frame "
+                        "is a cold start)")
+    p.add_argument("--cold-iters", type=positive_int, default=None,
+                   help=f"iterations of a cold start (a chunk's first frame); --iters is the budget of the "
+                        f"warm-started frames after it (default: {COLD_ITERS} or --iters, the larger)")
+    p.add_argument("--no-warm-start", action="store_true", help="start every frame from zero (each with --iters)")
     p.add_argument("--overwrite", action="store_true", help="recompute everything (default: only the missing frames)")
     add_solver_options(p)
     add_preprocessing_options(p)
@@ -56,7 +62,7 @@ def _run_batch(args):
 
     spec = BatchSpec(frames=tuple(args.frames), calibration=args.calibration, preprocessing=preprocessing_from(args),
                      settings=settings_from(args), backend=args.backend, device=args.device, fft=args.fft,
-                     path=args.path, warm_start=not args.no_warm_start)
+                     path=args.path, warm_start=not args.no_warm_start, cold_iters=args.cold_iters)
     bars = []
     try:
         return run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,

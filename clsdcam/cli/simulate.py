@@ -1,19 +1,32 @@
 """``clsdcam simulate OUTDIR``: a simulated camera, scene and measurement (or a drifting video)."""
 from __future__ import annotations
 
+import argparse
+
 from ..errors import InputError, shape_text
 from .options import add_simulation_options, examples, positive_int
+
+
+def drift_pair(text: str) -> tuple[float, float]:
+    """``DY,DX`` px per frame."""
+    try:
+        dy, dx = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected DY,DX in px per frame, e.g. 0.3,0.6") from None
+    return dy, dx
 
 
 def add_parser(subparsers):
     p = subparsers.add_parser("simulate", help="simulate a camera, a scene and its measurement", epilog=examples(
         "clsdcam simulate sim/ --scene target",
         "clsdcam simulate small/ --scene leds --size 64x96 --bands 16 --noise 1e-4",
-        "clsdcam simulate video/ --scene leds --frames 16",
+        "clsdcam simulate video/ --scene leds --frames 16 --drift 0.3,0.6",
         "clsdcam simulate lab/ --sweep --size 48x64 --bands 16   # + a monochromator sweep to calibrate from"))
     p.add_argument("outdir")
     p.add_argument("--frames", type=positive_int, default=None,
                    help="write a video of N frames of the scene drifting (frames.npy, truth.h5)")
+    p.add_argument("--drift", type=drift_pair, default=None, metavar="DY,DX",
+                   help="the video's drift in px per frame (default: 0,1 for leds, 0.5,0.5 for the others)")
     p.add_argument("--sweep", action="store_true",
                    help="also write a monochromator sweep of the filter array (sweep/, dark/, sweep_wavelengths.csv, "
                         "power.csv, true_filters.h5, psf_calibration.h5) for 'clsdcam calibrate filters'; the "
@@ -40,7 +53,8 @@ def run(args) -> int:
 def _simulate_video(args) -> int:
     from ..sim import simulate_video, write_video
 
-    calibration, frames, truth = simulate_video(args.scene, args.frames, args.size, args.bands, args.seed)
+    calibration, frames, truth = simulate_video(args.scene, args.frames, args.size, args.bands, args.seed,
+                                                drift=args.drift)
     paths = write_video(args.outdir, calibration, frames, truth)
     print(f"simulated {args.frames} frames of {args.scene!r}: " + ", ".join(str(p) for p in paths.values()))
     return 0

@@ -23,17 +23,19 @@ from .scenes import make_scene
 from .sensor import DEFAULT_SHAPE
 from .spectra import band_wavelengths
 
-DRIFT = {"leds": (0.0, 1.0), "target": (0.5, 0.5)}  # px per frame (y, x): drifting LED grid, translating target
+DRIFT = {"leds": (0.0, 1.0)}      # px per frame (y, x): a drifting LED grid; other scenes translate by DEFAULT_DRIFT
+DEFAULT_DRIFT = (0.5, 0.5)
 
 
 def simulate_video(scene: str = "leds", n_frames: int = 8, shape=DEFAULT_SHAPE, n_bands: int = 64,
-                   seed: int = 0, noise_var: float = 1e-5, photons: float | None = 20000.0):
-    """(calibration, frames (N, H, W) float32, truth (N, K, H, W) float32)."""
+                   seed: int = 0, noise_var: float = 1e-5, photons: float | None = 20000.0, drift=None):
+    """(calibration, frames (N, H, W) float32, truth (N, K, H, W) float32); ``drift`` (vy, vx) px per frame, by
+    default the scene's (DRIFT)."""
     wavelengths = band_wavelengths(n_bands)
     psf = caustic_psf(shape, seed)
     filters = filter_array(shape, wavelengths, seed)
     first = make_scene(scene, shape, wavelengths, seed)
-    vy, vx = DRIFT.get(scene, (0.0, 1.0))
+    vy, vx = drift if drift is not None else DRIFT.get(scene, DEFAULT_DRIFT)
     truth = np.stack([ndi.shift(first, (0, t * vy, t * vx), order=1) for t in range(n_frames)]).astype(np.float32)
     frames = np.stack([
         np.maximum(add_noise(noiseless_measurement(psf, filters, cube), np.random.default_rng(seed + t),
