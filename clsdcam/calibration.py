@@ -12,7 +12,9 @@ Inside, filters are (K,H,W) (docs/conventions.md); the file's (H,W,K) is convert
 Preprocessing (each step an option, the reference set in :meth:`Preprocessing.reference`):
 crop a window of calibration and measurement, drop the last band, zero the 4×4 defective
 block around the brightest pixel of Σ_k F_k (in filters and measurement), PSF → PSF/‖PSF‖₂,
-filters → F/max F.
+filters → F/max F. Before them, :func:`prepare` gives the measurement its raw steps: the calibration's recorded
+ones for a raw-size frame, else its own dark and binning (``Preprocessing.dark``, ``.bin``;
+:mod:`clsdcam.calibrate.measurement`).
 """
 from __future__ import annotations
 
@@ -196,6 +198,8 @@ class Preprocessing:
     drop_last_band: bool = False
     saturation: float | None = None          # exclude pixels with b ≥ saturation from the data term
     dead_pixels: PixelMask | None = None     # pixels to exclude, on the frame after cropping
+    dark: float | tuple[str, ...] | None = None   # the measurement's dark: a level or dark frame files (averaged)
+    bin: int = 1                             # the measurement's n × n binning (:mod:`.calibrate.measurement`)
 
     @classmethod
     def reference(cls) -> "Preprocessing":
@@ -250,32 +254,40 @@ def preprocess(calibration: Calibration, measurement: np.ndarray, options: Prepr
     return out, b
 
 
-def prepare(measurement, calibration, options: "Preprocessing | None" = None):
-    """(calibration, measurement) ready to solve, the same way for the API and the command line: either given
-    as a file path (loaded) or as an object/array, then :func:`preprocess` with ``options`` (default:
+def prepare(measurement, calibration, options: "Preprocessing | None" = None, report=None):
+    """(calibration, measurement) ready to solve, the same way for the API and the command line. ``measurement``:
+    a file path, a list of file paths (their mean) or an array; ``calibration``: a :class:`Calibration` or a file
+    path. Then the measurement's raw steps (:func:`raw_steps`) and :func:`preprocess` with ``options`` (default:
     :class:`Preprocessing` ()). The calibration's ``scale`` brings solved cubes back to its units.
 
-    A measurement of the calibration's recorded raw size (``calibration.raw``) first gets the raw steps the PSF
-    frames got (:func:`clsdcam.calibrate.raw.apply_raw_steps`: dark, crop, bin, centring shift); the returned
-    calibration's ``source`` then says so ("…; raw steps applied to the measurement: …"), and with it the
-    ``calibration`` attribute of a cube solved on it."""
-    from .io import load_measurement
+    What was done to the measurement (frames averaged, raw steps) is appended to the returned calibration's
+    ``source`` ("…; raw steps applied to the measurement: …"), and with it to the ``calibration`` attribute of a
+    cube solved on it; ``report`` (if given) is called with each of those lines."""
+    from .calibrate.measurement import mean_frame
 
+    options = options or Preprocessing()
     if not isinstance(calibration, Calibration):
         calibration = Calibration.load(calibration)
-    if isinstance(measurement, (str, Path)):
-        measurement = load_measurement(measurement)
-    calibration, measurement = with_raw_steps(calibration, measurement)
-    return preprocess(calibration, measurement, options or Preprocessing())
+    measurement, averaged = mean_frame(measurement)
+    measurement, steps = raw_steps(calibration, measurement, options)
+    notes = averaged + steps
+    for line in notes if report else ():
+        report(line)
+    source = "; ".join([calibration.source, *notes])
+    return preprocess(replace(calibration, source=source), measurement, options)
 
 
-def with_raw_steps(calibration: Calibration, measurement):
-    """(calibration, measurement) with the recorded raw steps applied when the measurement has the raw size."""
-    raw = calibration.raw
-    if raw is None or np.shape(measurement) != tuple(raw.shape):
-        return calibration, measurement
-    source = f"{calibration.source}; raw steps applied to the measurement: {raw.describe()}"
-    return replace(calibration, source=source), apply_raw_steps(raw, measurement)
+def raw_steps(calibration: Calibration, measurement, options: Preprocessing) -> tuple[np.ndarray, list[str]]:
+    """(measurement, notes) after the measurement's raw steps (:mod:`clsdcam.calibrate.measurement`): the
+    calibration's recorded ones (``calibration.raw``) when the measurement has the recorded raw size, with
+    ``options.dark`` in place of the recorded dark when given; else ``options.dark`` and ``options.bin``."""
+    from .calibrate.measurement import measurement_steps
+
+    measurement = np.asarray(measurement, np.float64)
+    steps, label = measurement_steps(calibration.raw, measurement, options.dark, options.bin)
+    if steps is None:
+        return measurement, []
+    return apply_raw_steps(steps, measurement), [f"{label}: {steps.describe()}"]
 
 
 def _crop_window(crop, calibration: Calibration, b: np.ndarray) -> tuple[slice, slice]:

@@ -1,6 +1,9 @@
 """``clsdcam calibrate``: lab frames → a calibration, step by step against hand-computed values, the remembered
 raw steps, the simulated sweep → calibrate filters → reconstruct loop, and bad input (exit 2, one line,
 nothing written)."""
+import json
+from dataclasses import replace
+
 import h5py
 import numpy as np
 import pytest
@@ -152,6 +155,79 @@ def test_dead_pixels_of_a_calibration_are_left_out_after_a_crop(tmp_path):
     np.testing.assert_array_equal(loaded.dead_pixels, dead)
     out, b = preprocess(loaded, np.ones((6, 7)), Preprocessing(crop=(1, 5, 1, 6)))
     assert out.dead_pixels is None and b[1, 2] == 0 and out.filters[:, 1, 2].tolist() == [0, 0] and b.sum() == 19
+
+
+# ---- a measurement's own steps: frames averaged, dark, bin (prepare and reconstruct) --------------------------
+def test_measurement_frames_are_averaged_darkened_and_binned(tmp_path):
+    cal = Calibration(np.ones((2, 3)), np.ones((1, 2, 3)), [550.0])
+    frames = [save(tmp_path / f"m{i}.npy", np.arange(24.0).reshape(4, 6) + 2 * i) for i in range(2)]
+    dark = save(tmp_path / "d.npy", np.full((4, 6), 4.0))
+    options = Preprocessing(dark=(dark,), bin=2, normalize_psf=False, normalize_filters=False)
+    lines = []
+    prepared, b = prepare(frames, cal, options, report=lines.append)
+    # mean = arange + 1; − 4, clipped: rows [0 0 0 0 1 2] [3 … 8] [9 … 14] [15 … 20]; 2×2 means
+    np.testing.assert_array_equal(b, [[(3 + 4) / 4, (5 + 6) / 4, (1 + 2 + 7 + 8) / 4],
+                                      [(9 + 10 + 15 + 16) / 4, (11 + 12 + 17 + 18) / 4, (13 + 14 + 19 + 20) / 4]])
+    assert lines == ["measurement: mean of 2 frames", "steps applied to the measurement: raw 4×6: dark mean dark "
+                     "frame, crop none, bin 2×2, shift (0, 0)"] and prepared.source.endswith(lines[1])
+    level = Preprocessing(dark=3.0, normalize_psf=False, normalize_filters=False)
+    np.testing.assert_array_equal(prepare(np.array([[1.0, 5, 4], [10, 3, 2]]), cal, level)[1], [[0, 2, 1], [7, 0, 0]])
+
+
+def test_a_raw_size_measurement_takes_its_own_dark_and_the_recorded_bin():
+    cal = Calibration(np.ones((2, 3)), np.ones((1, 2, 3)), [550.0], raw=RawSteps((4, 6), dark_level=100.0, bin=2))
+    frame = np.arange(24.0).reshape(4, 6)
+    plain = Preprocessing(normalize_psf=False, normalize_filters=False)
+    np.testing.assert_array_equal(prepare(frame + 100, cal, plain)[1], bin_pixels(frame, 2))
+    own = replace(plain, dark=1.0, bin=2)                       # its own dark 1 replaces the recorded 100
+    prepared, b = prepare(frame, cal, own)
+    np.testing.assert_array_equal(b, bin_pixels(np.maximum(frame - 1, 0), 2))
+    assert "raw steps applied to the measurement, its own dark: raw 4×6: dark 1," in prepared.source
+    with pytest.raises(InputError, match="whose recorded steps bin it 2×2; leave out --bin"):
+        prepare(frame, cal, replace(plain, bin=3))
+
+
+@pytest.fixture
+def small_camera(tmp_path):
+    """A one-band 8×10 calibration whose PSF frames were raw 16×20, dark 100, binned 2×2."""
+    psf = np.random.default_rng(0).random((8, 10))
+    path = tmp_path / "cal.h5"
+    Calibration(psf, np.ones((1, 8, 10)), [550.0], raw=RawSteps((16, 20), 100.0, bin=2)).save(path)
+    return str(path)
+
+
+def test_reconstruct_reports_and_records_the_measurement_steps(small_camera, tmp_path, capsys):
+    frames = [save(tmp_path / f"m{i}.npy", np.full((17, 21), v)) for i, v in enumerate((7.0, 9.0, 1e6))]
+    dark = save(tmp_path / "dark.npy", np.full((17, 21), 3.0))
+    assert main(["reconstruct", *frames, "--average", "2", "--dark", dark, "--bin", "2", "--calibration",
+                 small_camera, "-o", str(tmp_path / "cube.h5"), "--iters", "5", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "measurement: mean of 2 frames\nsteps applied to the measurement: raw 17×21: dark mean dark frame, " \
+           "crop none, bin 2×2" in out
+    with h5py.File(tmp_path / "cube.h5", "r") as f:
+        attrs = dict(f.attrs)
+    assert json.loads(attrs["measurement_path"]) == frames[:2] and attrs["dark_path"] == dark
+    assert json.loads(attrs["preprocessing"])["bin"] == 2 and json.loads(attrs["preprocessing"])["dark"] == [dark]
+    assert "mean of 2 frames; steps applied to the measurement" in attrs["calibration"]
+
+
+@pytest.mark.parametrize("shapes, extra, message", [
+    ([(16, 20)] * 2, ["--average", "3"], "--average 3: only 2 measurement files given"),
+    ([(16, 20), (16, 22)], [], "(frames of mixed sizes)"),
+    ([(17, 21)], ["--dark", "DARK"], "16×20, but the frames are 17×21"),
+    ([(16, 20)], ["--bin", "4"], "recorded steps bin it 2×2; leave out --bin"),
+    ([(17, 21)], ["--bin", "40"], "--bin 40: larger than the 17×21 frame"),
+])
+def test_bad_measurement_steps_exit_2_with_one_line_and_write_nothing(small_camera, tmp_path, capsys, shapes, extra,
+                                                                      message):
+    frames = [save(tmp_path / f"m{i}.npy", np.ones(shape)) for i, shape in enumerate(shapes)]
+    dark = save(tmp_path / "dark.npy", np.zeros((16, 20)))
+    output = tmp_path / "out" / "cube.h5"
+    code = main(["reconstruct", *frames, *[dark if a == "DARK" else a for a in extra], "--calibration", small_camera,
+                 "-o", str(output), "--png", str(tmp_path / "out" / "p"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and err.count("\n") == 1, err
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
 
 
 # ---- calibrate filters, step by step ---------------------------------------------------------------------

@@ -64,7 +64,10 @@ def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None =
 
 
 def _resolved(spec: BatchSpec) -> BatchSpec:
-    """``spec`` with absolute paths (workers may run elsewhere)."""
+    """``spec`` with absolute paths, the dark frames' too (workers may run elsewhere)."""
+    dark = spec.preprocessing.dark
+    if isinstance(dark, tuple):
+        spec = replace(spec, preprocessing=replace(spec.preprocessing, dark=tuple(str(Path(p).resolve()) for p in dark)))
     return replace(spec, frames=tuple(str(Path(p).resolve()) for p in spec.frames),
                    calibration=str(Path(spec.calibration).resolve()))
 

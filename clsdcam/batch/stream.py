@@ -17,7 +17,9 @@ fft, path, frame shape) and keeps the two last used (:func:`cached_solver`, an L
 later chunk: one build per Dask worker, not per frame. The calibration's preprocessing needs
 only the frame's shape (crop and size checks), so it runs on a zero frame of that shape (the
 one step that reads a frame's values, ``saturation``, is refused by :class:`BatchSpec`);
-the measurement's steps (crop, defect block, dead pixels) are applied to each frame.
+each frame first gets its raw steps (:func:`clsdcam.calibration.raw_steps`: the calibration's recorded
+ones for a frame of its raw size, else ``--dark`` and ``--bin``), then the measurement's steps (crop,
+defect block, dead pixels).
 """
 from __future__ import annotations
 
@@ -31,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, Preprocessing, preprocess
+from ..calibration import Calibration, Preprocessing, preprocess, raw_steps
 from ..errors import InputError
 from ..io import atomic_output
 from ..solver import Settings, Solver
@@ -125,8 +127,10 @@ def _solve_frame(spec: BatchSpec, i: int, frame, error: str | None, carried: Car
     if error is not None:
         return record, None, None
     try:
-        solver, raw, wavelengths = cached_solver(spec.calibration, spec.preprocessing, spec.settings, spec.backend,
-                                                 spec.device, spec.fft, spec.path, frame.shape)
+        raw = cached_calibration(spec.calibration)
+        frame, _ = raw_steps(raw, frame, spec.preprocessing)
+        solver, wavelengths = cached_solver(spec.calibration, spec.preprocessing, spec.settings, spec.backend,
+                                            spec.device, spec.fft, spec.path, frame.shape)
         b = _measurement(spec.preprocessing, raw, frame)
         start = time.perf_counter()
         result = next_solve(solver, b, carried, (spec.budget(warm=False), spec.budget(warm=True)))
@@ -158,14 +162,20 @@ def _measurement(options: Preprocessing, raw: Calibration, frame):
 
 
 @functools.lru_cache(maxsize=SOLVERS_KEPT)
+def cached_calibration(calibration: str) -> Calibration:
+    """The calibration file as it is (its raw steps and preprocessing still to apply), read once per process."""
+    return Calibration.load(calibration)
+
+
+@functools.lru_cache(maxsize=SOLVERS_KEPT)
 def cached_solver(calibration: str, preprocessing: Preprocessing, settings: Settings, backend: str,
                   device: str | None, fft: str, path: str, frame_shape: tuple[int, ...]):
-    """(solver, raw calibration, wavelengths) for frames of ``frame_shape``, built on first use in this process."""
-    raw = Calibration.load(calibration)
-    prepared, _ = preprocess(raw, np.zeros(frame_shape), preprocessing)
+    """(solver, wavelengths) for frames of ``frame_shape`` (after their raw steps), built on first use in this
+    process."""
+    prepared, _ = preprocess(cached_calibration(calibration), np.zeros(frame_shape), preprocessing)
     solver = Solver(prepared, backend=backend, device=_worker_device(backend, device), settings=settings, fft=fft,
                     path=path)
-    return solver, raw, np.asarray(prepared.wavelengths)
+    return solver, np.asarray(prepared.wavelengths)
 
 
 def _worker_device(backend: str, device: str | None):

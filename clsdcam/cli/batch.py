@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import sys
 
-from .options import add_preprocessing_options, add_solver_options, examples, integer_at_least, positive_int
+from .options import (add_measurement_options, add_preprocessing_options, add_solver_options, examples,
+                      integer_at_least, positive_int)
 
 COLD_ITERS = 40         # as clsdcam.batch.spec.COLD_ITERS (not imported: building the parser stays light)
 
@@ -36,6 +37,7 @@ def add_parser(subparsers):
     p.add_argument("--overwrite", action="store_true", help="recompute everything (default: only the missing frames)")
     add_solver_options(p)
     add_preprocessing_options(p)
+    add_measurement_options(p, average=False)
 
 
 def run(args) -> int:

@@ -152,6 +152,21 @@ def add_preprocessing_options(p: argparse.ArgumentParser):
                    help="image/.npy mask (non-zero = dead, same size as the measurement) of pixels to exclude")
 
 
+def add_measurement_options(p: argparse.ArgumentParser, average: bool = True):
+    """The measurement's own steps (:mod:`clsdcam.calibrate.measurement`): frames averaged (``average``: not for
+    batch, whose frames are a video), dark, binning."""
+    if average:
+        p.add_argument("--average", type=positive_int, default=None, metavar="N",
+                       help="average N consecutive frames into one measurement: the first N measurement files "
+                            "(default: all the files given)")
+    p.add_argument("--dark", nargs="+", default=None, metavar="FILE|LEVEL",
+                   help="the measurement's dark, subtracted and clipped at 0: dark frames (averaged) or one level; "
+                        "replaces the dark a calibration recorded (default: none, or the recorded one)")
+    p.add_argument("--bin", type=positive_int, default=1, metavar="N",
+                   help="N×N block means of the measurement, ragged edge dropped (a measurement of a calibration's "
+                        "raw size gets its recorded binning)")
+
+
 def add_simulation_options(p: argparse.ArgumentParser):
     from ..prototype import N_BANDS, SENSOR_SHAPE
 
@@ -215,7 +230,19 @@ def preprocessing_from(args):
         drop_last_band=args.drop_last_band or base.drop_last_band,
         saturation=getattr(args, "saturation", None),
         dead_pixels=_dead_pixels(args.dead_pixels, crop),
+        dark=_dark(getattr(args, "dark", None)),
+        bin=getattr(args, "bin", 1),
     )
+
+
+def _dark(values):
+    """--dark's values: one level (a number), dark frame files (a tuple) or None."""
+    from ..calibrate.dark import dark_level
+
+    if values is None:
+        return None
+    level = dark_level(values)
+    return tuple(values) if level is None else level
 
 
 def _dead_pixels(path, crop):

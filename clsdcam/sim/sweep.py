@@ -8,7 +8,8 @@ source at relative power p_i = P(λ_i) / max_j P(λ_j), in counts of 1 e⁻ each
 
     c_i = clip(round(DARK + Poisson(g · p_i · R(λ_i)) + 𝒩(0, READ²)), 0, 65535)   (16-bit)
 
-with g such that the brightest pixel of the sweep collects PEAK_COUNTS. P is the Cornerstone monochromator's
+with g such that the brightest pixel of the sweep collects PEAK_COUNTS (:func:`sweep_of` makes these frames of any
+response R, e.g. measured filter curves on a filter layout). P is the Cornerstone monochromator's
 measured power (``spectra/spectraldiffuserscope/cornerstone_power_20240223.csv`` under
 :func:`.scenes.shared_data_dir`) when present, else a smooth lamp-like curve; the simulator interpolates it
 linearly, as ``calibrate filters`` does. N_DARK dark frames are DARK + read noise.
@@ -74,16 +75,22 @@ def power_table() -> tuple[np.ndarray, str]:
 
 
 def simulate_sweep(shape, seed: int = 0) -> SweepSimulation:
-    """The sweep frames and dark frames of the module docstring (seeded)."""
+    """The sweep frames and dark frames of the module docstring (seeded), of the simulator's filter array."""
     lam = sweep_grid()
-    response = filter_array(shape, lam, seed)
+    return sweep_of(lam, filter_array(shape, lam, seed), seed)
+
+
+def sweep_of(wavelengths, response, seed: int = 0) -> SweepSimulation:
+    """A sweep of any pixel response R(λ_i; y, x) (N, H, W) at ``wavelengths`` (N,) nm (measured filter curves, say):
+    the frames c_i and dark frames of the module docstring (seeded)."""
+    lam, response = np.asarray(wavelengths, np.float64), np.asarray(response, np.float32)
     table, source = power_table()
     power = np.interp(lam, table[:, 0], table[:, 1])
     signal = power[:, None, None] / power.max() * response
     gain = PEAK_COUNTS / signal.max()
     rng = np.random.default_rng([seed, 1])
     frames = np.stack([_counts(rng, gain * s) for s in signal])
-    darks = np.stack([_counts(rng, np.zeros(shape)) for _ in range(N_DARK)])
+    darks = np.stack([_counts(rng, np.zeros(response.shape[1:])) for _ in range(N_DARK)])
     return SweepSimulation(lam, response, frames, darks, table, source)
 
 
@@ -93,9 +100,10 @@ def _counts(rng: np.random.Generator, electrons: np.ndarray) -> np.ndarray:
     return np.clip(np.round(counts), 0, FULL_SCALE).astype(np.uint16)
 
 
-def band_filters(sweep: SweepSimulation, n_bands: int) -> np.ndarray:
-    """The true filters of K equal bands over the prototype's range, scaled to max 1: (K, H, W) float32."""
-    integrals = integrate_bands(sweep.wavelengths, sweep.response, equal_edges(n_bands, *SPECTRAL_RANGE))
+def band_filters(sweep: SweepSimulation, n_bands: int, span=SPECTRAL_RANGE) -> np.ndarray:
+    """The true filters of K equal bands over ``span`` (nm; default the prototype's range), scaled to max 1:
+    (K, H, W) float32."""
+    integrals = integrate_bands(sweep.wavelengths, sweep.response, equal_edges(n_bands, *span))
     return (integrals / integrals.max()).astype(np.float32)
 
 
