@@ -28,6 +28,8 @@ Every phase, check and widening is counted in the history (``rank``, ``transform
 """
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from .interrupts import held_interrupt
@@ -200,7 +202,13 @@ class Phases:
         return self.loop.step * self._lipschitz
 
     def _subspace_problem(self, basis: np.ndarray, start=None) -> Problem:
-        sub = SpectralSubspace(self.solver.model, basis, self.priors, self.solver.calibration.filters, start)
+        """The problem on ``basis``; its Lipschitz constant (a power iteration) is the solver's last one when the
+        basis is the same (a stream's next frame carries its basis)."""
+        key = hashlib.sha1(np.ascontiguousarray(basis, np.float64).tobytes()).hexdigest()
+        known = self.solver.subspace_lipschitz
+        sub = SpectralSubspace(self.solver.model, basis, self.priors, self.solver.calibration.filters, start,
+                               known[1] if known and known[0] == key else None)
+        self.solver.subspace_lipschitz = (key, sub.lipschitz)
         return Problem(sub.model, self.solver.b, sub.prox, sub.penalty, sub.rank, subspace=sub)
 
     def _step(self, lipschitz: float) -> float:
@@ -243,7 +251,8 @@ class Phases:
     def _move(self, subspace: SpectralSubspace, basis: np.ndarray) -> Problem:
         """FISTA onto another basis, c ↦ B'ᵀB·c (lossless when span(B') ⊇ span(B)), momentum kept."""
         mix = basis.T @ subspace.basis
-        moved = self._subspace_problem(basis, start=self.backend.bandmix(subspace.model.power_vector, mix))
+        vector = getattr(subspace.model, "power_vector", None)      # none when its L was known (no power iteration)
+        moved = self._subspace_problem(basis, start=None if vector is None else self.backend.bandmix(vector, mix))
         self.loop.change_space(lambda c: self.backend.bandmix(c, mix), self._step(moved.subspace.lipschitz),
                                moved.objective)
         if basis.shape[1] == subspace.rank:

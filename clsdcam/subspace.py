@@ -98,14 +98,16 @@ def turning_directions(basis: np.ndarray, before: np.ndarray, after: np.ndarray,
 class SpectralSubspace:
     """A, the prox and the objective for cubes v = B·c, on one backend; built once per basis."""
 
-    def __init__(self, model, basis: np.ndarray, priors: list, filters: np.ndarray, start=None):
-        """``start``: a coefficient cube to begin the power iteration for L from (a related basis's)."""
+    def __init__(self, model, basis: np.ndarray, priors: list, filters: np.ndarray, start=None,
+                 lipschitz: float | None = None):
+        """``start``: a coefficient cube to begin the power iteration for L from (a related basis's);
+        ``lipschitz``: L when already known for this basis (no power iteration)."""
         be = self.backend = model.backend
         self.basis = np.asarray(basis, dtype=np.float64)
         self.rank = self.basis.shape[1]
         self.full_model = model
         self.model = model.with_filters(np.einsum("kj,khw->jhw", self.basis, filters).astype(be.dtype))
-        self.lipschitz = self.model.lipschitz(start=start)
+        self.lipschitz = lipschitz or self.model.lipschitz(start=start)
         self.cube_shape = self.model.cube_shape
         self._expanded = be.empty(model.cube_shape)
         self._average = ProxAverage(be, priors, model.cube_shape)

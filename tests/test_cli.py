@@ -233,3 +233,15 @@ def test_a_calibration_that_does_not_fit_is_reported(simulated, tmp_path, capsys
     assert "warning: the cube leaves" in wrong.err and wrong.err.count("\n") == 1
     with h5py.File(tmp_path / "right.h5", "r") as r, h5py.File(tmp_path / "wrong.h5", "r") as w:
         assert r.attrs["relative_residual"] < 0.1 < w.attrs["relative_residual"]   # measured: 0.054 and 0.72
+        assert r.attrs["residual_to_noise"] < 2.3 < w.attrs["residual_to_noise"]
+
+
+def test_a_noisy_measurement_with_the_right_calibration_is_not_reported(tmp_path, capsys):
+    """A residual that is mostly noise (high ‖Av − b‖/‖b‖, rms near the noise level) is no sign of a wrong
+    calibration: no warning."""
+    assert main(["simulate", str(tmp_path / "s"), *SMALL, "--scene", "leds", "--noise", "1e-3"]) == 0
+    assert main(["reconstruct", str(tmp_path / "s" / "measurement.npy"), "--calibration",
+                 str(tmp_path / "s" / "calibration.h5"), "-o", str(tmp_path / "c.h5"), "--quiet", "--iters", "60"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    with h5py.File(tmp_path / "c.h5", "r") as f:
+        assert f.attrs["relative_residual"] > 0.1 and f.attrs["residual_to_noise"] < 2.3
