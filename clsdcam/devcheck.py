@@ -4,8 +4,9 @@ Sections, each a list of rows (name, detail, ok; ok None for figures that pass o
 
 * device: its name, platform, driver, limits (memory, largest buffer, work-group size, compute units, fp64);
 * memory: the plan of the default problem (64 bands, sensor 320×448, the paper's 640×896 field) from
-  :func:`~clsdcam.backends.cl_devices.problem_bytes`: band space, a subspace of K/2 coefficients, one field
-  cube; fails when band space (what the solver checks up front) does not fit;
+  :func:`~clsdcam.backends.cl_devices.problem_bytes`: band space, the most bands of that field that fit, a
+  subspace of K/2 coefficients, one field cube; fails when band space (what the solver checks up front) does not
+  fit;
 * parity: every primitive of the contract (``backends/base.py``) against NumPy at two sizes, on each path
   the device runs (host and device on CPU devices, device elsewhere), float32; tolerances relative to
   max|reference|: 1e-6 elementwise (1e-5 for band mixes, sums of K products), 1e-5 reductions,
@@ -57,22 +58,21 @@ def device_rows(be) -> list[Row]:
 
 
 def memory_rows(be) -> list[Row]:
-    """The default problem's plan: band space (checked, as the solver does), a K/2 subspace, one field cube."""
-    from .backends.cl_devices import check_memory, problem_bytes
-    from .errors import InputError
+    """The default problem's plan: band space (checked, as the solver does: ``check_problem``), how many bands of
+    that field fit, a K/2 subspace, one field cube."""
+    from .backends.cl_devices import MOST_BANDS, bands_that_fit, problem_bytes, shortfall
 
     sensor, field, bands = DEFAULT_PROBLEM
-    band_space = problem_bytes(sensor, field, bands, be.dtype)
-    subspace = problem_bytes(sensor, field, bands // 2, be.dtype)
-    mib = 1 << 20
-    rows = [Row("memory", f"subspace ({bands // 2} coefficients)", f"{subspace[0] / mib:.0f} MiB"),
+    (total, largest), mib = problem_bytes(sensor, field, bands, be.dtype), 1 << 20
+    short = shortfall(be.device, total, largest)
+    plan = f"band space ({bands} bands, field {field[0]}×{field[1]})"
+    fit = bands_that_fit(be.device, sensor, field, be.dtype)
+    return [Row("memory", plan, f"{total / mib:.0f} MiB (largest buffer {largest / mib:.0f} MiB): "
+                + (short or "fits"), short is None),
+            Row("memory", "bands of that field that fit", f"{fit}{' or more' if fit == MOST_BANDS else ''}"),
+            Row("memory", f"subspace ({bands // 2} coefficients)",
+                f"{problem_bytes(sensor, field, bands // 2, be.dtype)[0] / mib:.0f} MiB"),
             Row("memory", "one field cube", f"{bands * field[0] * field[1] * be.dtype.itemsize / mib:.0f} MiB")]
-    try:
-        check_memory(be.device, *band_space)
-    except InputError as exc:
-        return [Row("memory", f"band space ({bands} bands, field {field[0]}×{field[1]})", str(exc), False)] + rows
-    return [Row("memory", f"band space ({bands} bands, field {field[0]}×{field[1]})",
-                f"{band_space[0] / mib:.0f} MiB (largest buffer {band_space[1] / mib:.0f} MiB): fits", True)] + rows
 
 
 # ---- parity ----------------------------------------------------------------------------------

@@ -35,6 +35,19 @@ def default_sigint():
     signal.signal(signal.SIGINT, inherited)
 
 
+def opencl_device():
+    """The OpenCL device clsdcam picks (PYOPENCL_CTX names another); the calling test module is skipped when
+    pyopencl or every OpenCL driver is missing."""
+    pytest.importorskip("pyopencl")
+    from clsdcam.backends import cl_devices
+    from clsdcam.errors import InputError
+
+    try:
+        return cl_devices.choose_device()
+    except InputError as exc:  # pragma: no cover - machines without any OpenCL driver
+        pytest.skip(f"no OpenCL device: {exc}", allow_module_level=True)
+
+
 # ---- the OpenCL parity suite's options (tests/test_parity.py; PYOPENCL_CTX picks its device) ----------------
 def pytest_addoption(parser):
     group = parser.getgroup("clsdcam-opencl", "OpenCL parity (tests/test_parity.py; PYOPENCL_CTX picks the device)")

@@ -12,20 +12,15 @@ import math
 
 import numpy as np
 import pytest
+from conftest import opencl_device
 
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 
 pytestmark = pytest.mark.opencl
+DEVICE = opencl_device()
 
-pytest.importorskip("pyopencl")
 from clsdcam.backends import cl_devices  # noqa: E402
-
-try:
-    DEVICE = cl_devices.choose_device()
-except InputError as exc:  # pragma: no cover - machines without any OpenCL driver
-    pytest.skip(f"no OpenCL device: {exc}", allow_module_level=True)
-
 from clsdcam.backends.base import HOST_CODE  # noqa: E402
 from clsdcam.backends.cl_host import MappedHostCode  # noqa: E402
 from clsdcam.backends.fft import ReiknaFFT, available_engines  # noqa: E402

@@ -146,6 +146,7 @@ def require_dtype(device, dtype) -> None:
 # ---- memory --------------------------------------------------------------------------------
 
 FIELD_BUFFERS = 6      # FISTA x, x_prev, y, z; the model's field; the prox scratch
+MOST_BANDS = 1024      # bands_that_fit looks no further
 
 
 def problem_bytes(sensor_shape, field_shape, n_bands: int, dtype="float32") -> tuple[int, int]:
@@ -169,14 +170,48 @@ def memory_limits(device) -> tuple[int, int]:
     return device.global_mem_size, device.max_mem_alloc_size
 
 
-def check_memory(device, needed: int, largest: int = 0) -> None:
-    """InputError when ``needed`` bytes exceed the device's global memory, or ``largest`` its max allocation."""
+ADVICE = "use fewer bands, a smaller crop or field, or another --device (clsdcam devices lists them)"
+
+
+def shortfall(device, needed: int, largest: int = 0) -> str | None:
+    """What does not fit on ``device``: None when ``needed`` bytes fit its global memory and ``largest`` its
+    largest buffer, else a phrase saying which and by how much (MiB)."""
     mib = 1 << 20
     memory, max_alloc = memory_limits(device)
-    advice = "use fewer bands, a smaller crop or field, or another --device (clsdcam devices lists them)"
     if needed > memory:
-        raise InputError(f"the problem needs about {needed / mib:.0f} MiB of device memory but "
-                         f"{describe(device)} has {memory / mib:.0f} MiB; {advice}")
+        return f"needs about {needed / mib:.0f} MiB of device memory but {describe(device)} has {memory / mib:.0f} MiB"
     if largest > max_alloc:
-        raise InputError(f"the problem needs a {largest / mib:.0f} MiB buffer but {describe(device)} "
-                         f"allows at most {max_alloc / mib:.0f} MiB per buffer; {advice}")
+        return (f"needs a {largest / mib:.0f} MiB buffer but {describe(device)} allows at most "
+                f"{max_alloc / mib:.0f} MiB per buffer")
+    return None
+
+
+def check_memory(device, needed: int, largest: int = 0) -> None:
+    """InputError when ``needed`` bytes exceed the device's global memory, or ``largest`` its max allocation."""
+    short = shortfall(device, needed, largest)
+    if short:
+        raise InputError(f"the problem {short}; {ADVICE}")
+
+
+def bands_that_fit(device, sensor_shape, field_shape, dtype="float32", most: int = MOST_BANDS) -> int:
+    """The most bands K ≤ ``most`` whose solve fits ``device`` (0 when not even one does): problem_bytes grows with
+    K, so the answer is found by bisection on K."""
+    low, high = 0, most              # K = low fits (or is 0), K = high + 1 does not (or is past most)
+    while low < high:
+        k = (low + high + 1) // 2
+        if shortfall(device, *problem_bytes(sensor_shape, field_shape, k, dtype)):
+            high = k - 1
+        else:
+            low = k
+    return low
+
+
+def check_problem(device, sensor_shape, field_shape, n_bands: int, dtype="float32") -> None:
+    """InputError, one line, when one solve of ``n_bands`` on ``field_shape`` does not fit ``device``: what it needs,
+    what the device has, and how many bands of that field would fit."""
+    short = shortfall(device, *problem_bytes(sensor_shape, field_shape, n_bands, dtype))
+    if short:
+        fit = bands_that_fit(device, sensor_shape, field_shape, dtype, n_bands)
+        field = "×".join(map(str, field_shape))
+        raise InputError(f"{n_bands} bands on a {field} field {short}; at most {fit} bands of that field fit: "
+                         f"{ADVICE}")

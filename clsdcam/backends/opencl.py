@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import HOST_CODE, resolve_path
-from .cl_devices import (check_memory, choose_device, context_queue, describe, import_pyopencl, is_cpu, problem_bytes,
+from .cl_devices import (check_memory, check_problem, choose_device, context_queue, describe, import_pyopencl, is_cpu,
                          require_dtype)
 from .numpy import COMPLEX_OF, real_dtype
 
@@ -94,7 +94,7 @@ class OpenCLBackend:
         check_memory(self.device, nbytes, largest)
 
     def check_problem(self, sensor_shape, field_shape, n_bands: int) -> None:
-        check_memory(self.device, *problem_bytes(sensor_shape, field_shape, n_bands, self.dtype))
+        check_problem(self.device, sensor_shape, field_shape, n_bands, self.dtype)
 
     # ---- FFT ----------------------------------------------------------------------------
     def fast_length(self, n: int) -> int:
