@@ -89,21 +89,23 @@ class Fista:
         self._start = time.perf_counter()
         self._enter(x0, step, objective)
 
-    def _enter(self, x0, step: float, objective):
-        """Start a space: iterates from x0 (copied), the best so far = x0."""
+    def _enter(self, x0, step: float, objective, evaluate: bool = True):
+        """Start a space: iterates from x0 (copied), the best so far = x0 (with F(x0) when ``evaluate``)."""
         be = self.backend
         self.x, self.x_prev, self.y, self.z, self.best = (be.copy(x0) for _ in range(5))
         self.objective = objective
-        self.best_objective = objective(self.x) if objective else math.inf
+        self.best_objective = objective(self.x) if objective and evaluate else math.inf
         self.last_checkpoint = self.best_objective
         self.step = step
         self.rolled_back = False
 
-    def change_space(self, mapping: Callable[[Any], Any], step: float, objective=None, keep_momentum: bool = True):
-        """Move x, x_prev and y through ``mapping`` (e.g. onto a spectral basis); keep t unless told not to."""
+    def change_space(self, mapping: Callable[[Any], Any], step: float, objective=None, keep_momentum: bool = True,
+                     evaluate: bool = True):
+        """Move x, x_prev and y through ``mapping`` (e.g. onto a spectral basis); keep t unless told not to;
+        ``evaluate=False``: F of the moved x is not computed (the first checkpoint sets the best)."""
         x, x_prev, y = (mapping(a) for a in (self.x, self.x_prev, self.y))
         t = self.t if keep_momentum else 1.0
-        self._enter(x, step, objective)
+        self._enter(x, step, objective, evaluate)
         be = self.backend
         be.copy(x_prev, out=self.x_prev)
         be.copy(y, out=self.y)

@@ -89,7 +89,8 @@ class Phases:
         iters, loop = self.iters, self.loop
         if self._subspace_allowed() and basis is not None:
             with held_interrupt():
-                self.problem = self._enter_basis(self.problem, basis, max(core, 1), "carried from the previous solve")
+                self.problem = self._enter_basis(self.problem, basis, max(core, 1), "carried from the previous solve",
+                                                 evaluate=False)
         elif self._subspace_allowed():
             reason = None if warm_started else self._warm_up()
             if reason:
@@ -180,11 +181,14 @@ class Phases:
             f"spectra settled; a mean sin² of at most {ENTRY_TAIL:g} of the lit spectra outside"
         return self._enter_basis(problem, basis, rank, how, spectra.captured(rank))
 
-    def _enter_basis(self, problem: Problem, basis: np.ndarray, core: int, how: str, captured: float = 1.0) -> Problem:
-        """FISTA onto ``basis`` (c = Bᵀx), said in the skip report."""
+    def _enter_basis(self, problem: Problem, basis: np.ndarray, core: int, how: str, captured: float = 1.0,
+                     evaluate: bool = True) -> Problem:
+        """FISTA onto ``basis`` (c = Bᵀx), said in the skip report; ``evaluate=False``: no F at the entry point (a
+        carried start: the first checkpoint sets the best)."""
         self._core = core
         subspace = self._subspace_problem(basis)
-        self.loop.change_space(subspace.subspace.project, self._step(subspace.subspace.lipschitz), subspace.objective)
+        self.loop.change_space(subspace.subspace.project, self._step(subspace.subspace.lipschitz), subspace.objective,
+                               evaluate=evaluate)
         self.tracker.report.lines.append(subspace_line(basis.shape[1], self.n_bands, self.loop.iterations + 1,
                                                        captured, how))
         return subspace

@@ -102,7 +102,8 @@ class Solver:
             return self._result(self.model.embed(np.zeros(self._cube_window_shape())), 1.0, [], "zero measurement")
         be, s = self.backend, self.settings
         self.b = be.to_device(b / scale)
-        priors = build_priors(be, s, DataReferences(self).value)
+        fresh = DataReferences(self).value
+        priors = build_priors(be, s, fresh if state is None else state.reference(fresh))
         if state is not None:
             state.apply_weights(priors)
         problem = self.band_problem(priors)
@@ -126,7 +127,8 @@ class Solver:
         out.attrs.update(relative_residual=fit, residual_to_noise=structure)
         out.snapshots = tracker.kept
         out.state = SolverState(be.scale(scale / self.calibration.scale, field), phases.basis(), phases.core(),
-                                phases.step_factor(), {p.name: p.relative for p in priors}, fit)
+                                phases.step_factor(), {p.name: p.relative for p in priors}, fit,
+                                {p.reference: p.unit for p in priors})
         return out
 
     def _fit_rule(self, loop: Fista, fit: float | None):

@@ -16,8 +16,9 @@ import numpy as np
 @dataclass
 class SolverState:
     """The field (a backend array, in the calibration's units), the basis (K × r) or None for band space, the
-    core rank, the step times the Lipschitz constant of its space, the priors' relative weights, and the fit
-    ‖Av − b‖/‖b‖ the solve reached (what the next frame's solve may stop at: ``Solver.solve(stop_at_fit=…)``)."""
+    core rank, the step times the Lipschitz constant of its space, the priors' relative weights and their data
+    references, and the fit ‖Av − b‖/‖b‖ the solve reached (what the next frame's solve may stop at:
+    ``Solver.solve(stop_at_fit=…)``)."""
 
     field: Any
     basis: np.ndarray | None
@@ -25,6 +26,12 @@ class SolverState:
     step_factor: float
     weights: dict[str, float] = field(default_factory=dict)
     fit: float = 0.0
+    references: dict[str, float] = field(default_factory=dict)
+
+    def reference(self, fresh):
+        """The weights' data references (e.g. ‖Aᵀb‖_∞ of b / max|b|) this state's solve used, for the priors of the
+        next: its weights stay what they were (no adjoint of a new b); ``fresh(name)`` for one it did not use."""
+        return lambda name: self.references[name] if name in self.references else fresh(name)
 
     def apply_weights(self, priors: list) -> None:
         """Give the priors the weights this state's solve used (auto ones included: no new estimate)."""

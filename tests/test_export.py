@@ -31,7 +31,7 @@ def batch_output(tmp_path_factory):
     assert main(["simulate", str(folder), "--size", "24x32", "--bands", "4", "--frames", "3", "--scene", "leds"]) == 0
     output = folder / "out.h5"
     assert main(["batch", str(folder / "frames.npy"), "--calibration", str(folder / "calibration.h5"),
-                 "-o", str(output), "--workers", "0", "--iters", "3", "--quiet"]) == 0
+                 "-o", str(output), "--workers", "0", "--iters", "3", "--chunk", "1", "--quiet"]) == 0
     return output
 
 

@@ -83,14 +83,15 @@ def stream(args, workdir: Path) -> dict:
 
 
 def _print_stream(args, rows, summary):
-    cold = f"cold {args.reference_iters} it. PSNR dB"
+    cold = [f"cold {args.reference_iters} it. PSNR dB"] if args.reference_iters else []
     print(f"stream: {args.scene} {args.bands}×{args.shape[0]}×{args.shape[1]}, drift {args.drift} px/frame, "
           f"{args.backend}; frame 0 cold ({args.cold_iters} it.), then warm (≤ {args.iters} it.)")
-    print(f"| frame | iterations (stop) | s | PSNR dB | {cold} |")
-    print("|---:|---:|---:|---:|---:|")
+    print("| " + " | ".join(["frame", "iterations (stop)", "s", "PSNR dB", *cold]) + " |")
+    print("|" + "---:|" * (4 + len(cold)))
     for r in rows:
-        print(f"| {r['frame']} | {r['iterations']} ({r['stop']}) | {r['seconds']:.2f} | {r['psnr']:.2f} | "
-              f"{r.get('cold_psnr', float('nan')):.2f} |")
+        cells = [str(r["frame"]), f"{r['iterations']} ({r['stop']})", f"{r['seconds']:.2f}", f"{r['psnr']:.2f}"]
+        cells += [f"{r['cold_psnr']:.2f}"] if cold else []
+        print("| " + " | ".join(cells) + " |")
     print(f"\nset-up {summary['setup_s']:.1f} s, first frame {summary['first_frame_s']:.1f} s; steady state "
           f"{summary['frames_per_s']:.2f} frames/s over {len(rows) - 1} frames; mean PSNR {summary['mean_psnr']:.2f} dB"
           + (f" (cold {args.reference_iters} it.: {summary['mean_cold_psnr']:.2f} dB)" if args.reference_iters else ""))
