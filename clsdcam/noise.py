@@ -9,7 +9,8 @@ The noise is estimated from r's horizontal neighbour differences d = r(y, x+1) �
     σ̂ = 1.4826 · median|d − median d| / √2
 
 (1.4826·MAD is σ for a Gaussian; a difference of two independent pixels has variance 2σ²). On the
-simulator's scenes, 30 iterations in, σ̂ is within 0.7–1.7× the true noise (README, "Choosing --tv").
+simulator's scenes, 30 iterations in, σ̂ is within 0.7–1.7× the true noise (docs/benchmarks.md,
+"Choosing ``--tv``").
 """
 from __future__ import annotations
 

@@ -16,7 +16,8 @@ suit any PSF or filter normalisation.
 A weight can also be ``auto`` for a prior with an ``auto_weight`` rule: it starts at a relative weight
 and, once the measurement's noise level σ̂ (relative to max|b|) is known (:mod:`clsdcam.noise`), becomes
 ``per_noise``·σ̂. A soft-thresholding denoiser's best threshold grows with the noise (the universal
-threshold is ∝ σ); ``per_noise`` is calibrated on the simulator's scenes (README, "Choosing --tv").
+threshold is ∝ σ); ``per_noise`` is calibrated on the simulator's scenes (docs/benchmarks.md, "Choosing
+``--tv``").
 
 Adding a prior: one class (``prox``, ``value``, ``reference``; the math in its docstring) and one row
 of :data:`PRIORS` (the ``Settings`` field and the ``--flag`` are generated from the row), and one test.
