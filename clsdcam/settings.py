@@ -15,6 +15,7 @@ from .errors import InputError
 from .priors import AUTO, PRIORS
 
 DEFAULT_ITERS = 300
+COLD_ITERS = 40     # a stream's cold start (a batch chunk's first frame): what reaches a cold solve's accuracy
 DEFAULT_TOL = 0.0
 
 

@@ -46,24 +46,28 @@ def shifted(cube: np.ndarray, d: tuple[float, float]) -> np.ndarray:
     return np.maximum(phase_shift(cube, d), 0)
 
 
+def significant_drift(before, previous, min_shift: float) -> tuple[float, float] | None:
+    """The drift from ``before`` to ``previous``; None when either is unknown or it is under ``min_shift`` px."""
+    if before is None or previous is None:
+        return None
+    d = drift(before, previous)
+    return None if np.hypot(*d) < min_shift else d
+
+
 def predict(before, previous, min_shift: float = MIN_SHIFT):
     """Warm start for frame i from x̂_{i−2} (``before``) and x̂_{i−1} (``previous``), assuming constant
     velocity: ``previous`` moved by their drift; ``previous`` itself without ``before`` or when the drift is
     under ``min_shift`` px."""
-    if previous is None or before is None:
-        return previous
-    d = drift(before, previous)
-    return previous if np.hypot(*d) < min_shift else shifted(previous, d)
+    d = significant_drift(before, previous, min_shift)
+    return previous if d is None else shifted(previous, d)
 
 
 def predict_state(before, previous, state, backend, min_shift: float = MIN_SHIFT):
     """A solver state (:class:`clsdcam.state.SolverState`) for frame i: frame i−1's, its whole field moved by
     the drift between the cubes x̂_{i−2} (``before``) and x̂_{i−1} (``previous``); as it is when the drift is
     unknown or under ``min_shift`` px."""
-    if before is None or previous is None:
-        return state
-    d = drift(before, previous)
-    if np.hypot(*d) < min_shift:
+    d = significant_drift(before, previous, min_shift)
+    if d is None:
         return state
     return replace(state, field=backend.to_device(moved_field(backend.to_host(state.field), state.basis, d)))
 

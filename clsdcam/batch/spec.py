@@ -6,9 +6,7 @@ from dataclasses import dataclass, field
 
 from ..calibration import Preprocessing
 from ..errors import InputError
-from ..settings import Settings
-
-COLD_ITERS = 40     # a cold start's default budget: what a chunk's first frame needs to reach a cold solve's accuracy
+from ..settings import COLD_ITERS, Settings
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,6 @@ import sys
 from .options import (add_measurement_options, add_preprocessing_options, add_solver_options, examples,
                       integer_at_least, positive_int)
 
-COLD_ITERS = 40         # as clsdcam.batch.spec.COLD_ITERS (not imported: building the parser stays light)
 
 EXAMPLES = examples(
     "clsdcam batch video/frames.npy --calibration video/calibration.h5 -o cubes.h5 --workers 2 --iters 10",
@@ -16,6 +15,8 @@ EXAMPLES = examples(
 
 
 def add_parser(subparsers):
+    from ..settings import COLD_ITERS
+
     p = subparsers.add_parser("batch", help="reconstruct many frames (warm-started streams on Dask workers)",
                               description="Reconstruct many frames: warm-started streams, on Dask workers; a "
                                           "re-run computes only the frames still missing.",
