@@ -146,7 +146,7 @@ class Solver:
         calibration of the right size but another camera's, 60 iterations, 64×96×16)."""
         problem.residual(x)
         r = self.backend.to_host(problem.residual_buffer)
-        norm = float(np.linalg.norm(self.backend.to_host(self.b)))
+        norm = float(np.sqrt(self.backend.vdot(self.b, self.b)))
         sigma = residual_noise(r)
         rms = float(np.sqrt(np.mean(np.square(r, dtype=np.float64))))
         return (float(np.linalg.norm(r)) / norm if norm > 0 else 0.0), (rms / sigma if sigma > 0 else 0.0)

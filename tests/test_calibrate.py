@@ -58,6 +58,15 @@ def test_dark_level_files_and_none(tmp_path):
 
 
 # ---- raw steps ------------------------------------------------------------------------------------
+def test_dark_frames_are_read_once_until_they_change(tmp_path):
+    """A batch subtracts the same dark from every frame: read once, read-only, read again when a file changes."""
+    frame, darks = np.ones((3, 4)), [save(tmp_path / f"d{i}.npy", np.full((3, 4), v)) for i, v in enumerate((1.0, 3.0))]
+    first, again = resolve_dark(darks, None, frame)[1], resolve_dark(darks, None, frame)[1]
+    assert again is first and not first.flags.writeable
+    save(tmp_path / "d1.npy", np.full((3, 4), 5.0, np.float32))        # another dtype: another size on disk
+    np.testing.assert_array_equal(resolve_dark(darks, None, frame)[1], np.full((3, 4), 3.0))
+
+
 def test_bin_means_blocks_and_drops_the_ragged_edge():
     image = np.arange(5 * 7, dtype=float).reshape(5, 7)
     expected = [[(0 + 1 + 7 + 8) / 4, (2 + 3 + 9 + 10) / 4, (4 + 5 + 11 + 12) / 4],

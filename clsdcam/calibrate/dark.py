@@ -13,12 +13,16 @@ Neither: no dark (level 0).
 """
 from __future__ import annotations
 
+import functools
+import os
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError, shape_text
 from .frames import average_frames
+
+DARKS_KEPT = 2      # dark-frame sets kept per process: a batch's frames all use one
 
 
 def corner_patch(n: int) -> tuple[slice, slice]:
@@ -60,7 +64,29 @@ def resolve_dark(values, corner: int | None, frame: np.ndarray) -> tuple[float, 
     level = dark_level(values)
     if level is not None:
         return level, None, f"{level:.6g}"
-    dark = average_frames(values, "dark")
+    dark = mean_dark(values)
     if dark.shape != frame.shape:
         raise InputError(f"dark {values[0]}: {shape_text(dark.shape)}, but the frames are {shape_text(frame.shape)}")
     return 0.0, dark, f"mean of {len(values)} dark frame{'s' * (len(values) > 1)} (mean {dark.mean():.6g})"
+
+
+def mean_dark(values) -> np.ndarray:
+    """The mean of the dark frame files ``values`` (read-only), read once per process while the files are
+    unchanged (same paths, sizes and modification times): a batch subtracts it from every frame."""
+    return _mean_of(tuple((str(v), *_stamp(v)) for v in values))
+
+
+def _stamp(path) -> tuple[int, int]:
+    """(modification time in ns, size) of a file; (0, 0) when it cannot be read (the reader says why)."""
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return 0, 0
+    return stat.st_mtime_ns, stat.st_size
+
+
+@functools.lru_cache(maxsize=DARKS_KEPT)
+def _mean_of(files: tuple[tuple[str, int, int], ...]) -> np.ndarray:
+    dark = average_frames([name for name, _, _ in files], "dark")
+    dark.setflags(write=False)
+    return dark
