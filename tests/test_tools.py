@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+import bench_accuracy  # noqa: E402
 import bench_iteration  # noqa: E402
 import bench_recon  # noqa: E402
 
@@ -35,6 +36,21 @@ def test_bench_recon_writes_its_tables_curves_and_plot(tmp_path, capsys):
     assert (tmp_path / "error_vs_time.png").stat().st_size > 0
     text = capsys.readouterr().out
     assert "| leds | numpy |" in text and "| leds | authors |" in text and "within 0.2 dB" in text
+
+
+def test_bench_accuracy_compares_the_default_with_the_full_solver_and_the_sweep(tmp_path, capsys):
+    bench_accuracy.main(["--scenes", "target,lines", "--size", "24x32", "--bands", "8", "--marks", "5,10",
+                         "--sweep", "1e-4,1e-3", "--out", str(tmp_path)])
+    results = json.loads((tmp_path / "accuracy.json").read_text())["scenes"]
+    assert set(results["lines"]) == {"default", "--no-skip", "--tv 0.0001", "--tv 0.001"}
+    assert [p["iteration"] for p in results["target"]["default"]["points"]] == [5, 10]
+    assert results["target"]["--tv 0.001"]["tv_chosen"] == 1e-3
+    text = (tmp_path / "accuracy.md").read_text()
+    assert text == capsys.readouterr().out
+    rows = [line for line in text.splitlines() if line.startswith("| target |")]
+    assert len(rows) == 5                                   # four runs, and the sweep's row
+    best = max(results["target"][f"--tv {tv}"]["points"][-1]["psnr"] for tv in ("0.0001", "0.001"))
+    assert f"{results['target']['default']['points'][-1]['psnr'] - best:+.2f} dB" in rows[-1]
 
 
 @pytest.mark.opencl

@@ -30,7 +30,7 @@ from clsdcam.solver import Settings, Solver
 
 SCENES = ("target", "leds", "piecewise", "realcube", "sources", "lines")
 CONFIGS = {"default": {}, "--no-skip": {"skip": False}}
-PSNR_MARGIN_DB, ANGLE_MARGIN_DEG = 0.2, 0.5
+PSNR_MARGIN_DB, ANGLE_MARGIN_DEG, SWEEP_MARGIN_DB = 0.2, 0.5, 0.5
 HAND = ("psf/diffusercam_tutorial_psf_sample.tif", "psf/diffusercam_tutorial_rawdata_hand_sample.tif")
 HAND_BIN, DARK_CORNER = 4, (slice(5, 15), slice(5, 15))
 
@@ -126,6 +126,23 @@ def verdict(runs: dict) -> str:
     return "yes" if not misses else "no (" + "; ".join(misses) + ")"
 
 
+def sweep_table(results: dict) -> list[str]:
+    """Per scene, at the last mark: the default's (automatic) weight against the best fixed ``--tv`` of the
+    sweep, and whether it is within SWEEP_MARGIN_DB of it in PSNR."""
+    lines = ["", f"`--tv auto` against the sweep's best fixed weight, PSNR at the last mark:", "",
+             "| scene | auto τ | auto PSNR | best fixed τ | its PSNR | auto − best | within "
+             f"{SWEEP_MARGIN_DB} dB |", "|---|---:|---:|---:|---:|---:|---|"]
+    for scene, runs in results["scenes"].items():
+        fixed = {name: run for name, run in runs.items() if name.startswith("--tv ")}
+        if not fixed:
+            continue
+        best = max(fixed.values(), key=lambda run: run["points"][-1]["psnr"])
+        auto, top = runs["default"]["points"][-1]["psnr"], best["points"][-1]["psnr"]
+        lines.append(f"| {scene} | {runs['default']['tv_chosen']:.3g} | {auto:.2f} dB | {best['tv_chosen']:.3g} | "
+                     f"{top:.2f} dB | {auto - top:+.2f} dB | {'yes' if auto >= top - SWEEP_MARGIN_DB else 'no'} |")
+    return lines if len(lines) > 4 else []
+
+
 def markdown(results: dict, marks) -> str:
     lines = ["| scene | run | τ | " + " | ".join(f"{m} it: PSNR / SA" for m in marks) + " | passes |",
              "|---|---|---:|" + "---|" * len(marks) + "---|"]
@@ -136,6 +153,7 @@ def markdown(results: dict, marks) -> str:
                                                                  else "") for p in run["points"]]
             mark = verdict(runs) if name == "default" else ""
             lines.append(f"| {scene} | {name} | {run['tv_chosen']:.3g} | " + " | ".join(cells) + f" | {mark} |")
+    lines += sweep_table(results)
     hand = results.get("hand")
     if hand:
         lines += ["", f"Hand (K = 1), correlation with {hand['reference']}:", "",
