@@ -342,6 +342,33 @@ def test_host_memory_of_a_dropped_buffer_is_kept_until_its_queued_work_is_done()
     assert be.allocator.retiring() == 0 and be.to_host(kept).sum() == 64.0
 
 
+def test_a_dropped_allocator_waits_for_its_queue_before_its_memory_goes():
+    """CPU devices: when the allocator itself is dropped (its backend gone, or at exit), the memory it still holds
+    for dropped buffers goes only after the queue has finished (the queue is held shut here by a user event)."""
+    import threading
+
+    import pyopencl as cl
+
+    from clsdcam.backends.cl_memory import HostBuffers
+
+    be = opencl("float32")
+    if be.allocator is None:
+        pytest.skip("device memory of its own: the driver owns it")
+    allocator, opened = HostBuffers(be.queue), []
+    buffer, gate = allocator(4096), cl.UserEvent(be.queue.context)
+    cl.enqueue_marker(be.queue, wait_for=[gate])               # nothing queued after this runs until the gate opens
+    del buffer                                                 # its memory waits behind the gate
+    assert allocator.retiring() == 1
+
+    def open_gate():
+        opened.append(True)
+        gate.set_status(cl.command_execution_status.COMPLETE)
+
+    threading.Timer(0.3, open_gate).start()
+    del allocator                                              # returns only once the queue has finished
+    assert opened
+
+
 def test_dropped_temporaries_do_not_corrupt_later_results(cl_tiny):
     """A device input dropped right after its kernel is queued (its host memory is ours on CPU devices) keeps
     its memory until the queue has done with it: mixes of temporaries stay exact, call after call."""

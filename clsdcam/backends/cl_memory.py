@@ -8,7 +8,10 @@ and NumPy's transparent huge pages on large allocations made pocketfft's passes 
 That host memory is ours, not the driver's, so it must outlive the work queued on it. A buffer's host
 memory is kept when Python lets go of the buffer, until a marker enqueued at that moment has completed:
 the in-order queue has then finished everything that could still read or write it (the queue's events,
-not reference counts, decide).
+not reference counts, decide). The allocator itself, when Python lets go of it (the last buffer dropped, a
+backend gone) or at exit, first waits for its queue: the memory it still holds goes only when nothing queued
+can touch it (a CPU runtime's worker threads otherwise write into freed NumPy memory: Intel's CPU runtime
+aborted on a corrupted heap after the parity tests under load).
 """
 from __future__ import annotations
 
@@ -38,6 +41,7 @@ class HostBuffers:
         self.queue = queue
         self._dropped: deque = deque()     # (marker, memory) of dropped buffers: appended on any thread, by GC
         self._retiring: list[tuple[cl.Event, np.ndarray]] = []
+        weakref.finalize(self, _finish_then_release, queue, self._dropped, self._retiring)
 
     def __call__(self, nbytes: int) -> HostBuffer:
         self.release_finished()
@@ -55,12 +59,19 @@ class HostBuffers:
         while self._dropped:
             self._retiring.append(self._dropped.popleft())
         done = cl.command_execution_status.COMPLETE
-        self._retiring = [(event, memory) for event, memory in self._retiring
-                          if event.command_execution_status != done]
+        self._retiring[:] = [(event, memory) for event, memory in self._retiring
+                             if event.command_execution_status != done]
 
     def retiring(self) -> int:
         """Dropped buffers whose memory is still kept (for tests)."""
         return len(self._retiring) + len(self._dropped)
+
+
+def _finish_then_release(queue, dropped: deque, retiring: list):
+    """The allocator is gone (or Python exits): wait for everything queued, then let its held memory go."""
+    queue.finish()
+    dropped.clear()
+    retiring.clear()
 
 
 def aligned_bytes(nbytes: int, alignment: int = ALIGNMENT) -> np.ndarray:
