@@ -38,19 +38,26 @@ def test_bench_recon_writes_its_tables_curves_and_plot(tmp_path, capsys):
     assert "| leds | numpy |" in text and "| leds | authors |" in text and "within 0.2 dB" in text
 
 
-def test_bench_accuracy_compares_the_default_with_the_full_solver_and_the_sweep(tmp_path, capsys):
-    bench_accuracy.main(["--scenes", "target,lines", "--size", "24x32", "--bands", "8", "--marks", "5,10",
-                         "--sweep", "1e-4,1e-3", "--out", str(tmp_path)])
+def test_bench_accuracy_compares_the_default_with_the_full_solver_the_sweep_and_fixed_ranks(tmp_path, capsys):
+    bench_accuracy.main(["--scenes", "target,lines", "--size", "24x32", "--bands", "8", "--marks", "5,20",
+                         "--sweep", "1e-4,1e-3", "--ranks", "2", "--out", str(tmp_path)])
     results = json.loads((tmp_path / "accuracy.json").read_text())["scenes"]
-    assert set(results["lines"]) == {"default", "--no-skip", "--tv 0.0001", "--tv 0.001"}
-    assert [p["iteration"] for p in results["target"]["default"]["points"]] == [5, 10]
+    assert set(results["lines"]) == {"default", "--no-skip", "--tv 0.0001", "--tv 0.001", "--rank 2"}
+    assert [p["iteration"] for p in results["target"]["default"]["points"]] == [5, 20]
     assert results["target"]["--tv 0.001"]["tv_chosen"] == 1e-3
+    assert results["target"]["--rank 2"]["final_rank"] == 2 and results["target"]["--no-skip"]["final_rank"] == 8
     text = (tmp_path / "accuracy.md").read_text()
     assert text == capsys.readouterr().out
-    rows = [line for line in text.splitlines() if line.startswith("| target |")]
-    assert len(rows) == 5                                   # four runs, and the sweep's row
+    main, sweep, ranks = text.split("\n\n`--tv auto`")[0], *text.split("\n\n")[2:5:2]
+    assert len([line for line in main.splitlines() if line.startswith("| target |")]) == 5     # every run
     best = max(results["target"][f"--tv {tv}"]["points"][-1]["psnr"] for tv in ("0.0001", "0.001"))
-    assert f"{results['target']['default']['points'][-1]['psnr'] - best:+.2f} dB" in rows[-1]
+    sweep_row = next(line for line in sweep.splitlines() if line.startswith("| target |"))
+    assert f"{results['target']['default']['points'][-1]['psnr'] - best:+.2f} dB" in sweep_row
+    rank_rows = [line for line in ranks.splitlines() if line.startswith("| target |")]
+    assert rank_rows[0].startswith("| target | default |") and rank_rows[-1].startswith("| target | --rank 2 | 2 |")
+    assert len(rank_rows) == 3                              # the automatic rule, the full solver, the fixed rank
+    alone = {"scenes": {"target": {name: results["target"][name] for name in ("default", "--no-skip")}}}
+    assert bench_accuracy.markdown(alone, [5, 20]).count("\n") == 3      # no sweep or rank table without their runs
 
 
 @pytest.mark.opencl

@@ -8,7 +8,9 @@ Scenes: the README's four (target, leds, piecewise, realcube), the paper's point
 single-pixel 10 nm lines, with each source's peak-wavelength error) and narrow lines at the range's ends, on
 bin boundaries and one faint (``lines``). A scene passes when, at every mark, the default's PSNR is at least
 the full solver's − 0.2 dB and its spectral angle at most the full solver's + 0.5°. ``--sweep`` adds the
-default solver at fixed ``--tv`` weights (the best of them against the default's weight choice). ``--hand``
+default solver at fixed ``--tv`` weights (the best of them against the default's weight choice), ``--ranks`` at
+fixed ``--rank`` sizes (what each basis size costs in seconds and gives in accuracy, beside the automatic rule's
+final rank). ``--hand``
 adds the DiffuserCam tutorial's hand (``../shared/data``; dark corner subtracted, binned 4×): correlation of
 each run with a long ``--no-skip`` run at ``--hand-tv``. Writes ``accuracy.json`` and ``accuracy.md``.
 """
@@ -65,16 +67,18 @@ def source_peaks(cube, wavelengths) -> np.ndarray:
                      for y, x in source_positions(cube.shape[1:])])
 
 
-def run_scene(scene: str, shape, bands: int, marks, sweep) -> dict:
+def run_configs(sweep, ranks) -> dict:
+    """Run name -> Settings fields: the default, the full solver, each fixed weight, each fixed rank."""
+    return {**CONFIGS, **{f"--tv {tv:g}": {"tv": tv} for tv in sweep}, **{f"--rank {r}": {"rank": r} for r in ranks}}
+
+
+def run_scene(scene: str, shape, bands: int, marks, sweep, ranks) -> dict:
     sim = simulate(scene=scene, shape=shape, n_bands=bands, seed=0)
     runs = {}
-    for name, fields in CONFIGS.items():
+    for name, fields in run_configs(sweep, ranks).items():
         snapshots, attrs = solve(sim.calibration, sim.measurement, fields, marks)
         runs[name] = {"points": scene_points(scene, sim, snapshots), **attrs}
         print(f"  {scene} {name}: {attrs['seconds']:.0f} s", file=sys.stderr, flush=True)
-    for tv in sweep:
-        snapshots, attrs = solve(sim.calibration, sim.measurement, {"tv": tv}, marks)
-        runs[f"--tv {tv:g}"] = {"points": scene_points(scene, sim, snapshots), **attrs}
     return runs
 
 
@@ -140,7 +144,19 @@ def sweep_table(results: dict) -> list[str]:
         auto, top = runs["default"]["points"][-1]["psnr"], best["points"][-1]["psnr"]
         lines.append(f"| {scene} | {runs['default']['tv_chosen']:.3g} | {auto:.2f} dB | {best['tv_chosen']:.3g} | "
                      f"{top:.2f} dB | {auto - top:+.2f} dB | {'yes' if auto >= top - SWEEP_MARGIN_DB else 'no'} |")
-    return lines if len(lines) > 4 else []
+    return lines if len(lines) > 5 else []
+
+
+def rank_table(results: dict) -> list[str]:
+    """Per scene with fixed ``--rank`` runs: each run's final rank and seconds (the marks' PSNR and spectral
+    angle are in the main table), the automatic rule and the full solver first."""
+    lines = ["", "Basis size against time (seconds for the whole run, on a shared machine: compare within a scene):",
+             "", "| scene | run | final rank | seconds |", "|---|---|---:|---:|"]
+    for scene, runs in results["scenes"].items():
+        if any(name.startswith("--rank ") for name in runs):
+            lines += [f"| {scene} | {name} | {run.get('final_rank', '')} | {run['seconds']:.0f} |"
+                      for name, run in runs.items() if not name.startswith("--tv ")]
+    return lines if len(lines) > 5 else []
 
 
 def markdown(results: dict, marks) -> str:
@@ -153,7 +169,7 @@ def markdown(results: dict, marks) -> str:
                                                                  else "") for p in run["points"]]
             mark = verdict(runs) if name == "default" else ""
             lines.append(f"| {scene} | {name} | {run['tv_chosen']:.3g} | " + " | ".join(cells) + f" | {mark} |")
-    lines += sweep_table(results)
+    lines += sweep_table(results) + rank_table(results)
     hand = results.get("hand")
     if hand:
         lines += ["", f"Hand (K = 1), correlation with {hand['reference']}:", "",
@@ -171,6 +187,7 @@ def main(argv=None) -> int:
     parser.add_argument("--bands", type=int, default=64)
     parser.add_argument("--marks", default="50,100,300,500")
     parser.add_argument("--sweep", default="", help="fixed --tv weights to compare, e.g. 1e-4,3e-4,1e-3,3e-3")
+    parser.add_argument("--ranks", default="", help="fixed --rank sizes to compare, e.g. 4,6,8,12")
     parser.add_argument("--hand", action="store_true", help="also the real hand (K = 1) from ../shared/data")
     parser.add_argument("--hand-tv", type=float, default=1e-4, help="--tv of the hand's long --no-skip reference")
     parser.add_argument("--hand-reference-iters", type=int, default=1000)
@@ -179,11 +196,12 @@ def main(argv=None) -> int:
     shape = tuple(int(v) for v in args.size.split("x"))
     marks = [int(m) for m in args.marks.split(",")]
     sweep = [float(t) for t in args.sweep.split(",") if t]
+    ranks = [int(r) for r in args.ranks.split(",") if r]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {"size": args.size, "bands": args.bands, "marks": marks, "scenes": {}}
     for scene in args.scenes.split(","):
-        results["scenes"][scene] = run_scene(scene, shape, args.bands, marks, sweep)
+        results["scenes"][scene] = run_scene(scene, shape, args.bands, marks, sweep, ranks)
         (out / "accuracy.json").write_text(json.dumps(results, indent=1))       # partial results survive a stop
     if args.hand:
         results["hand"] = run_hand(marks, sweep, args.hand_reference_iters, args.hand_tv, out)
