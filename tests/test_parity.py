@@ -193,15 +193,23 @@ def test_fft(case, dtype, engine):
     assert error <= fft_tolerance(FIELD[0] * FIELD[1])
 
 
-@pytest.mark.parametrize("shape", [(2, 21, 31), (5, 16, 9), (1, 7, 6)])
+@pytest.mark.parametrize("shape", [(2, 21, 31), (2, 43, 32), (5, 16, 9), (3, 21, 35), (1, 7, 6)])
 def test_fft_odd_shapes_and_band_counts(shape, engine):
-    """Odd sizes, odd band counts (one unpaired band when packing) and a single band."""
+    """Odd sizes, odd band counts (one unpaired band when packing), a single band, and planes with a prime factor
+    above 7 (VkFFT hands those to reikna)."""
     be, ref = opencl("float32", engine), NumpyBackend("float32")
     x = np.random.default_rng(3).standard_normal(shape).astype(np.float32)
     spectrum = be.fft2(be.to_device(x))
     tolerance = fft_tolerance(shape[1] * shape[2])
     assert relative_error(be.to_host(spectrum), ref.fft2(x)) <= tolerance
     assert relative_error(be.to_host(be.ifft2(spectrum, shape[1:])), x) <= tolerance
+
+
+def test_vkfft_transforms_7_smooth_planes_itself_and_hands_the_others_to_reikna():
+    pytest.importorskip("pyvkfft")
+    be = opencl("float32", "vkfft")
+    assert be.fft.engine_for((2, 21, 35)) is be.fft and be.fft.engine_for((4, 640, 896)) is be.fft
+    assert [be.fft.engine_for(shape).name for shape in ((2, 21, 31), (1, 43, 32), (1, 62, 64))] == ["reikna"] * 3
 
 
 @pytest.mark.parametrize("kahan", [None, True])

@@ -39,9 +39,6 @@ OCLGRIND_ALL = {**OCLGRIND, "OCLGRIND_UNINITIALIZED": "1", "OCLGRIND_BUILD_OPTIO
 NOT_UNDER_ALL_CHECKS = "not reikna and not vkfft and not read_only_memory"
 FFT_ENGINES_UNDER_RACE_CHECKS = "reikna or (vkfft and not reconstruction)"
 TINY = ("--cl-tiny",)
-# Open defect: on Intel's CPU runtime VkFFT's transform of a 21×31 plane (31 prime) comes out wrong in about one
-# run in three of the FFT tests (never alone, never on PoCL; the solver asks VkFFT only for 7-smooth lengths).
-INTEL_KNOWN_FAILURE = "not (vkfft and odd_shapes)"
 PORTABILITY_TIMEOUT = 1800      # seconds for one implementation's run (pytest-timeout's default is 600)
 
 
@@ -62,7 +59,7 @@ DEVICE_ENGINES = tuple(available_engines("device")) + ("reikna-unpacked",)
 FFT_CHECKED_ENGINES = ("reikna", "reikna-unpacked") + (("vkfft",) if "vkfft" in DEVICE_ENGINES else ())
 PLATFORMS = [
     Platform("pocl", "pocl", "Portable Computing Language", engines=DEVICE_ENGINES),
-    Platform("intel", "intel", "Intel(R) OpenCL", ("-k", INTEL_KNOWN_FAILURE), engines=DEVICE_ENGINES),
+    Platform("intel", "intel", "Intel(R) OpenCL", engines=DEVICE_ENGINES),
     Platform("oclgrind", "oclgrind", "Oclgrind", TINY + ("--cl-keep-buffers", "-k", NOT_UNDER_ALL_CHECKS), OCLGRIND_ALL),
     Platform("oclgrind-fft", "oclgrind", "Oclgrind", TINY + ("-k", FFT_ENGINES_UNDER_RACE_CHECKS), OCLGRIND,
              FFT_CHECKED_ENGINES),

@@ -70,3 +70,15 @@ def test_bench_kernels_runs_every_row_on_opencl_and_numpy(tmp_path):
     results = json.loads(out.read_text())["results"]
     assert set(results) == {"opencl", "numpy"}
     assert {"forward", "adjoint_step", "iteration"} <= set(results["opencl"]) == set(results["numpy"])
+
+
+@pytest.mark.opencl
+def test_check_vkfft_plans_counts_wrong_plans_per_shape(capsys):
+    pytest.importorskip("pyopencl")
+    pytest.importorskip("pyvkfft")
+    import check_vkfft_plans
+
+    check_vkfft_plans.main(["--shapes", "2x21x35,1x8x47", "--plans", "2"])
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and "shape" not in line]
+    assert rows[0] == "| 2x21x35 | no, no | 0 of 2 |"                 # 7-smooth: VkFFT's own radices, right
+    assert rows[1].startswith("| 1x8x47 | yes, no |")               # 47: Bluestein's algorithm on the W axis

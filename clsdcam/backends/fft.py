@@ -12,7 +12,10 @@ Engines (``make_fft(queue, path, engine)``; which path runs which engine is the 
 * ``reikna`` reikna's complex FFT on the device plus our ``fft.cl`` kernels: two real bands
   packed into one complex transform, z = x_a + i·x_b, unpacked by Hermitian symmetry
   X_a = (Z[κ] + conj Z[−κ])/2, X_b = (Z[κ] − conj Z[−κ])/(2i) (``pack=False``: one band each).
-* ``vkfft``  pyvkfft's native R2C/C2R, when pyvkfft is installed.
+* ``vkfft``  pyvkfft's native R2C/C2R, when pyvkfft is installed, for 7-smooth planes; a plane with a
+  prime factor above 7 goes to reikna (VkFFT builds those with Rader's algorithm, and on Intel's CPU
+  runtime about one such plan in three transforms wrong: ``docs/portability.md``). The solver's fields
+  are 7-smooth (``fast_length``) except ``--no-skip``'s 2H × 2W when H or W has a prime factor above 7.
 
 Plans are built on first use for a shape and kept in bounded caches (the few most recent).
 Each engine says which lengths it transforms fast (``fast_length``): 5-smooth for pocketfft's
@@ -35,6 +38,7 @@ from .cl_memory import mapped
 from .cl_program import Kernels
 
 PLAN_CACHE = 8          # FFT plans kept (per engine), the most recently used
+VKFFT_PRIMES = (2, 3, 5, 7)     # the prime factors VkFFT's plans may have here (no Rader's algorithm)
 
 
 @atexit.register
@@ -173,15 +177,30 @@ class VkFFT(RealFFT):
     def __init__(self, kernels: Kernels):
         super().__init__(kernels)
         self._scratch = None            # the C2R input: one half spectrum, kept for the last shape
+        self._reikna = None             # for planes with a prime factor above 7, made on first use
 
     def fast_length(self, n: int) -> int:
-        return smooth_length(n, (2, 3, 5, 7))
+        return smooth_length(n, VKFFT_PRIMES)
+
+    def engine_for(self, field_shape) -> RealFFT:
+        """This engine for a 7-smooth (Hp, Wp) plane, else reikna (see the module docstring)."""
+        if all(smooth_length(n, VKFFT_PRIMES) == n for n in field_shape[-2:]):
+            return self
+        if self._reikna is None:
+            self._reikna = ReiknaFFT(self.kernels)
+        return self._reikna
 
     def forward(self, x, out):
+        engine = self.engine_for(x.shape)
+        if engine is not self:
+            return engine.forward(x, out)
         _vkfft_app(self.queue, tuple(x.shape), self.kernels.dtype).fft(x, out)
         return out
 
     def inverse(self, spectrum, out):
+        engine = self.engine_for(out.shape)
+        if engine is not self:
+            return engine.inverse(spectrum, out)
         k, hp, wp = out.shape
         if self._scratch is None or self._scratch.shape != spectrum.shape:
             self._scratch = cla.empty(self.queue, spectrum.shape, spectrum.dtype)
