@@ -3,23 +3,24 @@
 A raw lensless frame is no place to measure noise: the filter array and the caustic give it texture at
 the pixel scale (a median-absolute-deviation estimate on the raw frame comes out 2–10× the true noise
 on the simulator's scenes). The model reproduces that texture, so the residual r = b − Av of an iterate
-that already fits the scene's coarse structure is noise plus what is not yet fitted, mostly smooth.
-The noise is estimated from r's horizontal neighbour differences d = r(y, x+1) − r(y, x), robustly:
+that already fits the scene's coarse structure is noise plus what is not yet fitted. What is not yet
+fitted still has edges at the pixel scale (the caustic's lines, the filter tiles); Donoho and Johnstone's
+estimator reads the noise from the finest diagonal wavelet details (HH, Daubechies-2) of r, which pass white
+noise whole but an edge only where it is diagonal, robustly:
 
-    σ̂ = 1.4826 · median|d − median d| / √2
+    σ̂ = median|HH(r)| / 0.6745         (0.6745: the 75th percentile of |𝒩(0, 1)|)
 
-(1.4826·MAD is σ for a Gaussian; a difference of two independent pixels has variance 2σ²). On the
-simulator's scenes, 30 iterations in, σ̂ is within 0.7–1.7× the true noise (docs/benchmarks.md,
-"Choosing ``--tv``").
+(``skimage.restoration.estimate_sigma``). On the simulator's six panel scenes, 30 iterations in, σ̂ is
+within 0.97–1.42× the true noise at 320×448 (horizontal pixel differences, the first design: 1.03–1.91×),
+and 0.95–1.16× at 128×160 (0.96–1.95×); ``tools/bench_accuracy.py`` reports it per scene (docs/benchmarks.md).
 """
 from __future__ import annotations
 
 import numpy as np
 
-MAD_TO_SIGMA = 1.4826
-
 
 def residual_noise(residual: np.ndarray) -> float:
     """σ̂ of a residual image (H, W) (see the module docstring)."""
-    d = np.diff(np.asarray(residual, np.float64), axis=1).ravel()
-    return float(MAD_TO_SIGMA * np.median(np.abs(d - np.median(d))) / np.sqrt(2))
+    from skimage.restoration import estimate_sigma
+
+    return float(estimate_sigma(np.asarray(residual, np.float64)))

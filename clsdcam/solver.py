@@ -141,9 +141,10 @@ class Solver:
 
     def _residual_figures(self, problem: Problem, x) -> tuple[float, float]:
         """(‖r‖/‖b‖, rms(r)/σ̂(r)) of the final residual r = Av − b: how much of the measurement the cube leaves
-        unexplained, and whether that is noise (rms over the noise level read from r's pixel-to-pixel
-        differences, :func:`clsdcam.noise.residual_noise`: about 1–1.7 on the simulator's scenes, 3–6 with a
-        calibration of the right size but another camera's, 60 iterations, 64×96×16)."""
+        unexplained, and whether that is noise (rms over the noise level read from r's finest wavelet details,
+        :func:`clsdcam.noise.residual_noise`: 1.0–4.0 on the simulator's six panel scenes, 8.6–18.8 with a
+        calibration of the right size but another camera's, 60 iterations, 64×96×16; the bright sparse scenes,
+        point sources and narrow lines, leave the most unfitted structure)."""
         problem.residual(x)
         r = self.backend.to_host(problem.residual_buffer)
         norm = float(np.sqrt(self.backend.vdot(self.b, self.b)))

@@ -26,7 +26,7 @@ import numpy as np
 
 from clsdcam.analysis import peak_wavelength
 from clsdcam.metrics import psnr, spectral_angle
-from clsdcam.sim import shared_data_dir, simulate
+from clsdcam.sim import noiseless_measurement, shared_data_dir, simulate
 from clsdcam.sim.scenes import source_lines, source_positions
 from clsdcam.solver import Settings, Solver
 
@@ -42,7 +42,8 @@ def solve(calibration, measurement, fields: dict, marks) -> tuple[dict, dict]:
     solver = Solver(calibration, settings=Settings(iters=max(marks), **fields))
     start = time.perf_counter()
     result = solver.solve(measurement, snapshots=marks)
-    attrs = {key: result.attrs[key] for key in ("tv", "final_rank", "fft_work_saved") if key in result.attrs}
+    attrs = {key: result.attrs[key] for key in ("tv", "final_rank", "fft_work_saved", "noise_estimate")
+             if key in result.attrs}
     attrs["tv_chosen"] = result.attrs.get("tv_chosen", result.attrs.get("tv"))
     attrs["seconds"] = time.perf_counter() - start
     return result.snapshots, attrs
@@ -72,12 +73,21 @@ def run_configs(sweep, ranks) -> dict:
     return {**CONFIGS, **{f"--tv {tv:g}": {"tv": tv} for tv in sweep}, **{f"--rank {r}": {"rank": r} for r in ranks}}
 
 
+def true_noise(sim) -> float:
+    """The simulated noise's standard deviation relative to max b (what ``--tv auto`` estimates)."""
+    calibration = sim.calibration
+    clean = noiseless_measurement(calibration.psf, calibration.filters, sim.truth)
+    return float(np.std(sim.measurement - clean) / np.max(sim.measurement))
+
+
 def run_scene(scene: str, shape, bands: int, marks, sweep, ranks) -> dict:
     sim = simulate(scene=scene, shape=shape, n_bands=bands, seed=0)
     runs = {}
     for name, fields in run_configs(sweep, ranks).items():
         snapshots, attrs = solve(sim.calibration, sim.measurement, fields, marks)
         runs[name] = {"points": scene_points(scene, sim, snapshots), **attrs}
+        if name == "default":
+            runs[name]["true_noise"] = true_noise(sim)
         print(f"  {scene} {name}: {attrs['seconds']:.0f} s", file=sys.stderr, flush=True)
     return runs
 
@@ -147,6 +157,18 @@ def sweep_table(results: dict) -> list[str]:
     return lines if len(lines) > 5 else []
 
 
+def noise_table(results: dict) -> list[str]:
+    """Per scene: the noise ``--tv auto`` read from the residual against the simulated noise, and its weight."""
+    lines = ["", "The noise `--tv auto` read (σ̂, relative to max b) against the simulated noise:", "",
+             "| scene | true σ | σ̂ | σ̂ / σ | auto τ |", "|---|---:|---:|---:|---:|"]
+    for scene, runs in results["scenes"].items():
+        run = runs["default"]
+        if "noise_estimate" in run:
+            lines.append(f"| {scene} | {run['true_noise']:.3g} | {run['noise_estimate']:.3g} | "
+                         f"{run['noise_estimate'] / run['true_noise']:.2f} | {run['tv_chosen']:.3g} |")
+    return lines if len(lines) > 5 else []
+
+
 def rank_table(results: dict) -> list[str]:
     """Per scene with fixed ``--rank`` runs: each run's final rank and seconds (the marks' PSNR and spectral
     angle are in the main table), the automatic rule and the full solver first."""
@@ -169,7 +191,7 @@ def markdown(results: dict, marks) -> str:
                                                                  else "") for p in run["points"]]
             mark = verdict(runs) if name == "default" else ""
             lines.append(f"| {scene} | {name} | {run['tv_chosen']:.3g} | " + " | ".join(cells) + f" | {mark} |")
-    lines += sweep_table(results) + rank_table(results)
+    lines += sweep_table(results) + noise_table(results) + rank_table(results)
     hand = results.get("hand")
     if hand:
         lines += ["", f"Hand (K = 1), correlation with {hand['reference']}:", "",
