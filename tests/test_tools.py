@@ -27,9 +27,10 @@ def test_bench_iteration_times_every_configuration_against_the_authors_and_the_f
 
 def test_bench_recon_writes_its_tables_curves_and_plot(tmp_path, capsys):
     bench_recon.main(["--scenes", "leds", "--size", "24x32", "--bands", "8", "--iters", "20", "--authors-iters", "20",
-                      "--reference-iters", "30", "--configs", "numpy,numpy --no-skip", "--out", str(tmp_path)])
+                      "--reference-iters", "30", "--configs", "numpy,numpy --no-skip,numpy --rank 2", "--out", str(tmp_path)])
     results = json.loads((tmp_path / "results.json").read_text())["leds"]
-    assert set(results) == {"numpy", "numpy --no-skip", bench_recon.AUTHORS}
+    assert set(results) == {"numpy", "numpy --no-skip", "numpy --rank 2", bench_recon.AUTHORS}
+    assert results["numpy --rank 2"]["ranks"][-1] == 2
     curve = results["numpy"]["curve"]
     assert [p["iteration"] for p in curve] == bench_recon.marks(20)
     assert all(b["seconds"] > a["seconds"] for a, b in zip(curve, curve[1:]))

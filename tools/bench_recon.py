@@ -36,9 +36,19 @@ CONFIGS = {  # name -> (backend, Settings fields)
     "opencl --no-skip": ("opencl", {"skip": False}),
     "numpy float64": ("numpy", {"dtype": "float64"}),
 }
+RANKED = "numpy --rank "     # + N: the default at a fixed basis size (what an oracle rank would give)
 AUTHORS = "authors"
 FULL, DEFAULT = "numpy --no-skip", "numpy"
 SKIP_MARGIN_DB = 0.2
+
+
+def config(name: str) -> tuple[str, dict]:
+    """(backend, Settings fields) of a configuration name: one of CONFIGS, or ``numpy --rank N``."""
+    if name.startswith(RANKED) and name[len(RANKED):].isdigit():
+        return "numpy", {"rank": int(name[len(RANKED):])}
+    if name not in CONFIGS:
+        raise ValueError(f"unknown configuration {name!r} (from: {', '.join(CONFIGS)}, {RANKED}N)")
+    return CONFIGS[name]
 
 
 def marks(iters: int) -> list[int]:
@@ -153,9 +163,13 @@ def main(argv=None) -> int:
     parser.add_argument("--iters", type=int, default=500, help="iterations of every configuration")
     parser.add_argument("--authors-iters", type=int, default=500, help="0 leaves the authors' algorithm out")
     parser.add_argument("--reference-iters", type=int, default=1000)
-    parser.add_argument("--configs", default=",".join(CONFIGS), help=f"from: {', '.join(CONFIGS)}")
+    parser.add_argument("--configs", default=",".join(CONFIGS), help=f"from: {', '.join(CONFIGS)}, {RANKED}N")
     parser.add_argument("--out", default="bench-recon")
     args = parser.parse_args(argv)
+    try:
+        configs = {name: config(name) for name in args.configs.split(",")}
+    except ValueError as error:
+        parser.error(str(error))
     shape = tuple(int(v) for v in args.size.split("x"))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -164,8 +178,7 @@ def main(argv=None) -> int:
         sim = simulate(scene=scene, shape=shape, n_bands=args.bands, seed=0)
         reference = Solver(sim.calibration, settings=Settings(iters=args.reference_iters, dtype="float64",
                                                               skip=False)).solve(sim.measurement).cube
-        results[scene] = {name: run_clsdcam(sim, *CONFIGS[name], args.iters, reference)
-                          for name in args.configs.split(",")}
+        results[scene] = {name: run_clsdcam(sim, *chosen, args.iters, reference) for name, chosen in configs.items()}
         if args.authors_iters:
             results[scene][AUTHORS] = run_authors(sim, args.authors_iters, reference)
         print(f"{scene}: done", file=sys.stderr)
