@@ -89,8 +89,7 @@ class Phases:
         iters, loop = self.iters, self.loop
         if self._subspace_allowed() and basis is not None:
             with held_interrupt():
-                self.problem = self._enter_basis(self.problem, basis, max(core, 1), "carried from the previous solve",
-                                                 evaluate=False)
+                self.problem = self._enter_basis(self.problem, basis, max(core, 1), "carried from the previous solve")
         elif self._subspace_allowed():
             reason = None if warm_started else self._warm_up()
             if reason:
@@ -181,14 +180,14 @@ class Phases:
             f"spectra settled; a mean sin² of at most {ENTRY_TAIL:g} of the lit spectra outside"
         return self._enter_basis(problem, basis, rank, how, spectra.captured(rank))
 
-    def _enter_basis(self, problem: Problem, basis: np.ndarray, core: int, how: str, captured: float = 1.0,
-                     evaluate: bool = True) -> Problem:
-        """FISTA onto ``basis`` (c = Bᵀx), said in the skip report; ``evaluate=False``: no F at the entry point (a
-        carried start: the first checkpoint sets the best)."""
+    def _enter_basis(self, problem: Problem, basis: np.ndarray, core: int, how: str, captured: float = 1.0
+                     ) -> Problem:
+        """FISTA onto ``basis`` (c = Bᵀx), said in the skip report; the first checkpoint in the subspace sets the best
+        iterate (see :meth:`_move`)."""
         self._core = core
         subspace = self._subspace_problem(basis)
         self.loop.change_space(subspace.subspace.project, self._step(subspace.subspace.lipschitz), subspace.objective,
-                               evaluate=evaluate)
+                               evaluate=False)
         self.tracker.report.lines.append(subspace_line(basis.shape[1], self.n_bands, self.loop.iterations + 1,
                                                        captured, how))
         return subspace
@@ -253,12 +252,18 @@ class Phases:
         return self._move(sub, basis)
 
     def _move(self, subspace: SpectralSubspace, basis: np.ndarray) -> Problem:
-        """FISTA onto another basis, c ↦ B'ᵀB·c (lossless when span(B') ⊇ span(B)), momentum kept."""
+        """FISTA onto another basis, c ↦ B'ᵀB·c (lossless when span(B') ⊇ span(B)), momentum kept.
+
+        The mapped point does not become the best iterate: the subspace's iteration c⁺ = Bᵀ·prox(B·c − s∇) is not a
+        proximal-gradient step on F(c) = f(Bc) + g(Bc) (its prox also clips B·c at zero, which F does not charge), so
+        a projection can score an F the iteration never reaches again, and a checkpoint held to it rolls back for
+        ever (a target scene entered at iteration 91 with 32 vectors: PSNR frozen from iteration 100). The first
+        checkpoint in the new space sets the best."""
         mix = basis.T @ subspace.basis
         vector = getattr(subspace.model, "power_vector", None)      # none when its L was known (no power iteration)
         moved = self._subspace_problem(basis, start=None if vector is None else self.backend.bandmix(vector, mix))
         self.loop.change_space(lambda c: self.backend.bandmix(c, mix), self._step(moved.subspace.lipschitz),
-                               moved.objective)
+                               moved.objective, evaluate=False)
         if basis.shape[1] == subspace.rank:
             self._refreshes += 1
         return moved
