@@ -257,8 +257,9 @@ class Phases:
         The mapped point does not become the best iterate: the subspace's iteration c⁺ = Bᵀ·prox(B·c − s∇) is not a
         proximal-gradient step on F(c) = f(Bc) + g(Bc) (its prox also clips B·c at zero, which F does not charge), so
         a projection can score an F the iteration never reaches again, and a checkpoint held to it rolls back for
-        ever (a target scene entered at iteration 91 with 32 vectors: PSNR frozen from iteration 100). The first
-        checkpoint in the new space sets the best."""
+        ever (the 96×128 target entered at iteration 91 with 32 vectors: PSNR frozen from iteration 100;
+        ``tests/test_skips.py::test_a_late_entry_keeps_improving``). The first checkpoint in the new space sets the
+        best."""
         mix = basis.T @ subspace.basis
         vector = getattr(subspace.model, "power_vector", None)      # none when its L was known (no power iteration)
         moved = self._subspace_problem(basis, start=None if vector is None else self.backend.bandmix(vector, mix))
