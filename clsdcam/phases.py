@@ -89,7 +89,7 @@ class Phases:
         iters, loop = self.iters, self.loop
         if self._subspace_allowed() and basis is not None:
             with held_interrupt():
-                self.problem = self._enter_basis(self.problem, basis, max(core, 1), "carried from the previous solve")
+                self.problem = self._enter_basis(basis, max(core, 1), "carried from the previous solve")
         elif self._subspace_allowed():
             reason = None if warm_started else self._warm_up()
             if reason:
@@ -178,10 +178,9 @@ class Phases:
             return problem
         how = f"--rank {rank}" if self.settings.rank else \
             f"spectra settled; a mean sin² of at most {ENTRY_TAIL:g} of the lit spectra outside"
-        return self._enter_basis(problem, basis, rank, how, spectra.captured(rank))
+        return self._enter_basis(basis, rank, how, spectra.captured(rank))
 
-    def _enter_basis(self, problem: Problem, basis: np.ndarray, core: int, how: str, captured: float = 1.0
-                     ) -> Problem:
+    def _enter_basis(self, basis: np.ndarray, core: int, how: str, captured: float = 1.0) -> Problem:
         """FISTA onto ``basis`` (c = Bᵀx), said in the skip report; the first checkpoint in the subspace sets the best
         iterate (see :meth:`_move`)."""
         self._core = core
