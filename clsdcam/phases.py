@@ -157,7 +157,7 @@ class Phases:
                 f"{prior.name}: auto, {prior.relative:.3g} (noise σ ≈ {noise:.3g} of max|b|, from the residual at "
                 f"iteration {self.loop.iterations})")
         self.chosen["noise_estimate"] = noise
-        self.loop.change_space(self.backend.copy, self.loop.step, problem.objective)
+        self.loop.change_objective(problem.objective)
 
     def _subspace_allowed(self) -> bool:
         s = self.settings

@@ -132,11 +132,32 @@ def test_a_run_in_phases_through_an_identity_change_of_space_is_the_same_run():
     whole = problem.run(iters=120, objective=problem.objective)
     loop = Fista(BACKEND, np.zeros_like(problem.exact), step=1 / problem.lipschitz, objective=problem.objective,
                  rules=Rules())
-    for _ in range(4):
+    for mapping in (lambda a: a.copy(), lambda a: a, lambda a: a.copy(), lambda a: a):
         assert loop.run(problem.gradient_step, problem.prox, 30) is None
-        loop.change_space(lambda a: a.copy(), 1 / problem.lipschitz, problem.objective)
+        loop.change_space(mapping, 1 / problem.lipschitz, problem.objective)
     assert loop.iterations == 120
     np.testing.assert_array_equal(loop.x, whole.x)
+
+
+def test_a_change_of_space_of_the_same_size_writes_into_the_iterates_arrays():
+    """No new arrays when the space keeps its size (the mapping's own results aside), distinct ones when it
+    changes; a change of objective keeps the iterates and momentum and scores x under the new objective."""
+    from clsdcam.fista import Fista, Rules
+
+    problem = Quadratic(7, m=40, n=40, mu=1e-3)
+    loop = Fista(BACKEND, np.zeros_like(problem.exact), step=1 / problem.lipschitz, objective=problem.objective,
+                 rules=Rules())
+    loop.run(problem.gradient_step, problem.prox, 10)
+    before = [loop.x, loop.x_prev, loop.y, loop.z, loop.best]
+    loop.change_space(lambda a: a.copy(), 1 / problem.lipschitz, problem.objective)
+    after = [loop.x, loop.x_prev, loop.y, loop.z, loop.best]
+    assert all(a is b for a, b in zip(before, after))
+    x, t = loop.x.copy(), loop.t
+    loop.change_objective(lambda v: 2 * problem.objective(v))
+    assert loop.t == t and loop.best_objective == pytest.approx(2 * problem.objective(x))
+    np.testing.assert_array_equal(loop.best, x)
+    loop.change_space(lambda a: a[:20].copy(), 1 / problem.lipschitz)
+    assert loop.x.shape == (20,) and len({id(a) for a in (loop.x, loop.x_prev, loop.y, loop.z, loop.best)}) == 5
 
 
 def test_fista_stops_on_an_objective_plateau():

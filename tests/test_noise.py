@@ -19,6 +19,16 @@ def test_residual_noise_reads_white_noise_under_a_smooth_signal():
         assert residual_noise(smooth + rng.normal(0.0, sigma, smooth.shape)) == pytest.approx(sigma, rel=0.05)
 
 
+def test_residual_noise_is_scikit_images_wavelet_estimate():
+    """The estimator read from PyWavelets directly is skimage's ``estimate_sigma``, on odd-sized images too."""
+    from skimage.restoration import estimate_sigma
+
+    rng = np.random.default_rng(1)
+    for shape in ((64, 80), (97, 131)):
+        image = rng.normal(0.0, 0.3, shape) + np.linspace(0.0, 5.0, shape[1])
+        assert residual_noise(image) == pytest.approx(estimate_sigma(image), rel=1e-12)
+
+
 @pytest.mark.parametrize("scene", ["leds", "lines", "target"])
 def test_the_noise_read_from_the_residual_is_the_simulated_noise(scene):
     """At AUTO_AT the residual still holds unfitted edges at the pixel scale (caustic, filter tiles); the
