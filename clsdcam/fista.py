@@ -106,7 +106,7 @@ class Fista:
         ``evaluate=False``: F of the moved x is not computed (the first checkpoint sets the best)."""
         x, x_prev, y = (mapping(a) for a in (self.x, self.x_prev, self.y))
         t = self.t if keep_momentum else 1.0
-        self._enter(x, step, objective, evaluate, keep=(x, x_prev, y))
+        self._enter(x, step, objective, evaluate, keep=(x_prev, y))
         be = self.backend
         be.copy(x_prev, out=self.x_prev)
         be.copy(y, out=self.y)
