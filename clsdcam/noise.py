@@ -11,7 +11,7 @@ noise whole but an edge only where it is diagonal, robustly:
     σ̂ = median|HH(r)| / 0.6745         (0.6745: the 75th percentile of |𝒩(0, 1)|)
 
 (``skimage.restoration.estimate_sigma``'s estimator, read here straight from PyWavelets' ``dwtn``: importing
-``skimage.restoration`` takes 0.6 s on this 2-core machine, paid inside the first solve of a process). On the
+``skimage.restoration`` takes 0.4–0.7 s on this 2-core machine, paid inside the first solve of a process). On the
 simulator's six panel scenes, 30 iterations in, σ̂ is within 0.97–1.42× the true noise at 320×448 (horizontal
 pixel differences, the first design: 1.03–1.91×), and 0.95–1.16× at 128×160 (0.96–1.95×);
 ``tools/bench_accuracy.py`` reports it per scene (docs/benchmarks.md).
