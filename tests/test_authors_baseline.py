@@ -9,7 +9,7 @@ from clsdcam.model import ForwardModel
 from clsdcam.sim import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
-from authors_baseline import AuthorsSolver, haar_tv_periodic  # noqa: E402
+from authors_baseline import AuthorsReplay, AuthorsSolver, haar_tv_periodic  # noqa: E402
 
 
 def test_same_forward_and_adjoint_as_clsdcam():
@@ -40,3 +40,13 @@ def test_the_baseline_run_lowers_the_data_term():
         return np.linalg.norm(solver.forward(field) - sim.measurement)
 
     assert residual(cubes[-1]) < 0.5 * residual(cubes[0])
+
+
+def test_the_replay_follows_the_published_iteration_in_float32():
+    sim = simulate(scene="target", shape=(24, 32), n_bands=4, seed=0)
+    published = AuthorsSolver(sim.calibration.psf, sim.calibration.filters)
+    replay = AuthorsReplay(published)
+    assert replay.lipschitz == published.lipschitz
+    for (_, theirs), (_, ours) in zip(published.run(sim.measurement, 30), replay.run(sim.measurement, 30)):
+        assert ours.dtype == np.float32
+        np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-5 * np.abs(theirs).max())

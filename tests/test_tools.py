@@ -39,6 +39,19 @@ def test_bench_recon_writes_its_tables_curves_and_plot(tmp_path, capsys):
     assert "| leds | numpy |" in text and "| leds | authors |" in text and "within 0.2 dB" in text
 
 
+def test_bench_recon_can_time_a_few_published_iterations_and_replay_the_rest(tmp_path, capsys):
+    bench_recon.main(["--scenes", "leds,target", "--size", "24x32", "--bands", "8", "--iters", "10", "--authors-iters", "25",
+                      "--authors-timed", "4", "--reference-iters", "0", "--configs", "numpy", "--out", str(tmp_path)])
+    results = json.loads((tmp_path / "results.json").read_text())
+    for scene in ("leds", "target"):
+        authors = results[scene][bench_recon.AUTHORS]
+        assert authors["timed_iterations"] == 4 and authors["replay_difference"] < 1e-3
+        assert [p["iteration"] for p in authors["curve"]] == bench_recon.marks(25)
+        assert authors["curve"][-1]["seconds"] == pytest.approx(authors["setup"] + 25 * authors["per_iteration"])
+        assert authors["curve"][-1]["error"] is None
+    assert "| leds | numpy |" in capsys.readouterr().out
+
+
 def test_bench_accuracy_compares_the_default_with_the_full_solver_the_sweep_and_fixed_ranks(tmp_path, capsys):
     bench_accuracy.main(["--scenes", "target,lines", "--size", "24x32", "--bands", "8", "--marks", "5,20",
                          "--sweep", "1e-4,1e-3", "--ranks", "2", "--out", str(tmp_path)])
