@@ -45,11 +45,20 @@ def test_bench_recon_can_time_a_few_published_iterations_and_replay_the_rest(tmp
     results = json.loads((tmp_path / "results.json").read_text())
     for scene in ("leds", "target"):
         authors = results[scene][bench_recon.AUTHORS]
-        assert authors["timed_iterations"] == 4 and authors["replay_difference"] < 1e-3
+        assert authors["timed_iterations"] == 4 and [p["iteration"] for p in authors["timed_curve"]] == [1, 4]
+        assert 0 < authors["replay_difference"] < 1e-5          # float32 against float64 after four iterations
         assert [p["iteration"] for p in authors["curve"]] == bench_recon.marks(25)
         assert authors["curve"][-1]["seconds"] == pytest.approx(authors["setup"] + 25 * authors["per_iteration"])
         assert authors["curve"][-1]["error"] is None
     assert "| leds | numpy |" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("timed", ["1", "25"])
+def test_bench_recon_refuses_a_timed_count_it_cannot_replay_from(tmp_path, timed):
+    with pytest.raises(SystemExit) as stop:
+        bench_recon.main(["--scenes", "leds", "--size", "24x32", "--bands", "8", "--authors-iters", "25",
+                          "--authors-timed", timed, "--out", str(tmp_path / "out")])
+    assert stop.value.code == 2 and not (tmp_path / "out").exists()
 
 
 def test_bench_accuracy_compares_the_default_with_the_full_solver_the_sweep_and_fixed_ranks(tmp_path, capsys):
