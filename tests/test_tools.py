@@ -53,6 +53,13 @@ def test_bench_recon_can_time_a_few_published_iterations_and_replay_the_rest(tmp
     assert "| leds | numpy |" in capsys.readouterr().out
 
 
+def test_bench_recon_times_a_single_published_iteration_from_their_set_up(tmp_path):
+    bench_recon.main(["--scenes", "leds", "--size", "24x32", "--bands", "8", "--iters", "5", "--authors-iters", "1",
+                      "--reference-iters", "0", "--configs", "numpy", "--out", str(tmp_path)])
+    authors = json.loads((tmp_path / "results.json").read_text())["leds"][bench_recon.AUTHORS]
+    assert authors["per_iteration"] == pytest.approx(authors["curve"][0]["seconds"] - authors["setup"])
+
+
 @pytest.mark.parametrize("timed", ["1", "25"])
 def test_bench_recon_refuses_a_timed_count_it_cannot_replay_from(tmp_path, timed):
     with pytest.raises(SystemExit) as stop:

@@ -89,7 +89,8 @@ def run_clsdcam(sim, backend, fields, iters, reference) -> dict:
 def run_authors(sim, iters, reference, timed: int = 0) -> tuple[dict, AuthorsSolver, np.ndarray]:
     """(run, solver, last cube) of the published solver over ``iters`` iterations, or over its first ``timed``
     only, to be replayed (:func:`replay_authors`). The time spent scoring cubes is left out; the seconds per
-    iteration are those between the first and the last scored iteration (the first also pays warm-up)."""
+    iteration are those between the first and the last scored iteration (the first also pays warm-up; with one
+    iteration, since set-up)."""
     start = time.perf_counter()
     solver = AuthorsSolver(sim.calibration.psf, sim.calibration.filters)
     setup = time.perf_counter() - start
@@ -99,7 +100,7 @@ def run_authors(sim, iters, reference, timed: int = 0) -> tuple[dict, AuthorsSol
             now = time.perf_counter()
             curve.append(point(k, now - start - scoring, cube, sim.truth, reference))
             scoring += time.perf_counter() - now
-    first, last = curve[0], curve[-1]
+    first, last = curve[0] if len(curve) > 1 else {"iteration": 0, "seconds": setup}, curve[-1]   # one: from set-up
     per_iteration = (last["seconds"] - first["seconds"]) / (last["iteration"] - first["iteration"])
     return {"curve": curve, "per_iteration": per_iteration, "setup": setup, "fft": "numpy complex128"}, solver, cube
 
