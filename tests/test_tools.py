@@ -3,12 +3,14 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import bench_accuracy  # noqa: E402
 import bench_iteration  # noqa: E402
 import bench_recon  # noqa: E402
+import rank_signals  # noqa: E402
 
 
 def test_bench_iteration_times_every_configuration_against_the_authors_and_the_fft_floor(tmp_path, capsys):
@@ -88,6 +90,24 @@ def test_bench_accuracy_compares_the_default_with_the_full_solver_the_sweep_and_
     assert len(rank_rows) == 3                              # the automatic rule, the full solver, the fixed rank
     alone = {"scenes": {"target": {name: results["target"][name] for name in ("default", "--no-skip")}}}
     assert bench_accuracy.markdown(alone, [5, 20]).count("\n") == 3      # no sweep or rank table without their runs
+
+
+def test_rank_signals_reads_the_band_iterate_the_default_warms_up_with(tmp_path, capsys):
+    rank_signals.main(["--scenes", "leds,target", "--size", "24x32", "--bands", "8", "--at", "5,10", "--out", str(tmp_path)])
+    results = json.loads((tmp_path / "rank_signals.json").read_text())["scenes"]
+    assert (tmp_path / "rank_signals.md").read_text() == capsys.readouterr().out
+    leds = results["leds"]
+    assert leds["truth"]["rule_rank"] == 3 and leds["truth"]["gaps"][0][0] == 3       # three LED spectra
+    assert list(leds["iterates"]) == ["5", "10"]
+    for signal in leds["iterates"].values():
+        energies = np.array(signal["energies"])
+        assert len(energies) == 4 and np.all(np.diff(energies) <= 0) and energies.sum() <= 1 + 1e-12
+        first, ratio = signal["gaps"][0]
+        assert ratio == pytest.approx(energies[first - 1] / energies[first])
+    sim = rank_signals.simulate(scene="leds", shape=(24, 32), n_bands=8, seed=0)
+    default = rank_signals.Solver(sim.calibration, settings=rank_signals.Settings(iters=5))
+    cube = default.solve(sim.measurement, snapshots=[5]).snapshots[5]
+    assert rank_signals.signals(cube) == leds["iterates"]["5"]       # the default's own warm-up iterate
 
 
 @pytest.mark.opencl

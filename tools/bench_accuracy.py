@@ -202,18 +202,24 @@ def markdown(results: dict, marks) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def panel_parser(description: str, out: str) -> argparse.ArgumentParser:
+    """The options every tool on the panel's scenes takes: --scenes, --size HxW, --bands, --out."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--scenes", default=",".join(SCENES))
     parser.add_argument("--size", default="320x448")
     parser.add_argument("--bands", type=int, default=64)
+    parser.add_argument("--out", default=out)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = panel_parser(__doc__.splitlines()[0], "accuracy")
     parser.add_argument("--marks", default="50,100,300,500")
     parser.add_argument("--sweep", default="", help="fixed --tv weights to compare, e.g. 1e-4,3e-4,1e-3,3e-3")
     parser.add_argument("--ranks", default="", help="fixed --rank sizes to compare, e.g. 4,6,8,12")
     parser.add_argument("--hand", action="store_true", help="also the real hand (K = 1) from ../shared/data")
     parser.add_argument("--hand-tv", type=float, default=1e-4, help="--tv of the hand's long --no-skip reference")
     parser.add_argument("--hand-reference-iters", type=int, default=1000)
-    parser.add_argument("--out", default="accuracy")
     args = parser.parse_args(argv)
     shape = tuple(int(v) for v in args.size.split("x"))
     marks = [int(m) for m in args.marks.split(",")]

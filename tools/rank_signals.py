@@ -1,0 +1,90 @@
+#!/usr/bin/env python3
+"""What a subspace-size rule can read from the band iterate: the lit spectra's eigenvalues while band space runs.
+
+    python tools/rank_signals.py --size 320x448 --bands 64 --at 20,30,40,50 --out rank-signals
+
+For each scene, the default solver runs in band space only (``--rank K``: the warm-up the default runs before it
+enters its subspace, the same skips and weights), and at each iteration of ``--at`` the lit unit spectra of the
+iterate's sensor window give the Gram eigenvalues e_1 ≥ e_2 ≥ … (:class:`clsdcam.subspace.Spectra`, normalised
+to sum 1). Printed beside each other:
+
+* the automatic rule's entry rank, the fewest directions leaving a mean sin² of at most ``ENTRY_TAIL`` outside;
+* the largest eigenvalue gap: the j ≤ K/2 with the largest e_j / e_{j+1}, and the runner-up;
+* the truth's rank: the same rule on the simulated cube's own lit spectra (its content, no reconstruction error).
+
+``docs/benchmarks.md`` sets these beside the basis size each scene needs (``bench_accuracy.py --ranks``).
+Writes ``rank_signals.json`` and ``rank_signals.md``.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_accuracy import panel_parser  # noqa: E402  (the panel's scenes and options)
+
+from clsdcam.phases import ENTRY_TAIL, MAX_RANK_FRACTION  # noqa: E402
+from clsdcam.sim import simulate  # noqa: E402
+from clsdcam.solver import Settings, Solver  # noqa: E402
+from clsdcam.subspace import Spectra, lit_shapes  # noqa: E402
+
+ROUND_OFF = 1e-12
+
+
+def signals(cube: np.ndarray) -> dict:
+    """The rule's rank, the two largest eigenvalue gaps (rank, ratio) among the first K/2, and e_1…e_K/2
+    (eigenvalues under ROUND_OFF count as zero: a noiseless cube's tail is float64 round-off)."""
+    spectra = Spectra.of_shapes(lit_shapes(cube))
+    half = max(int(cube.shape[0] * MAX_RANK_FRACTION), 1)
+    energies = spectra.energies / max(float(spectra.energies.sum()), np.finfo(float).tiny)
+    ratios = np.where(energies[:half] > ROUND_OFF, energies[:half] / np.maximum(energies[1:half + 1], ROUND_OFF), 0.0)
+    gaps = np.argsort(ratios)[::-1][:2]
+    return {"rule_rank": spectra.rank_for(ENTRY_TAIL), "gaps": [[int(j) + 1, float(ratios[j])] for j in gaps],
+            "energies": [float(e) for e in energies[:half]]}
+
+
+def run_scene(scene: str, shape, bands: int, at) -> dict:
+    """The truth's signals and the band iterate's at each iteration of ``at``."""
+    sim = simulate(scene=scene, shape=shape, n_bands=bands, seed=0)
+    solver = Solver(sim.calibration, settings=Settings(iters=max(at), rank=bands))
+    snapshots = solver.solve(sim.measurement, snapshots=at).snapshots
+    return {"truth": signals(np.asarray(sim.truth)),
+            "iterates": {str(k): signals(cube) for k, cube in sorted(snapshots.items())}}
+
+
+def markdown(results: dict) -> str:
+    lines = ["| scene | iteration | rule's rank | largest gap: rank (e_j/e_j+1) | next gap |",
+             "|---|---:|---:|---|---|"]
+    for scene, run in results["scenes"].items():
+        rows = [("truth", run["truth"])] + list(run["iterates"].items())
+        for name, s in rows:
+            (first, r1), (second, r2) = s["gaps"]
+            lines.append(f"| {scene} | {name} | {s['rule_rank']} | {first} ({r1:.3g}) | {second} ({r2:.3g}) |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = panel_parser(__doc__.splitlines()[0], "rank-signals")
+    parser.add_argument("--at", default="20,30,40,50", help="band-space iterations to read the spectra at")
+    args = parser.parse_args(argv)
+    shape = tuple(int(v) for v in args.size.split("x"))
+    at = [int(k) for k in args.at.split(",")]
+    results = {"size": args.size, "bands": args.bands, "entry_tail": ENTRY_TAIL, "scenes": {}}
+    for scene in args.scenes.split(","):
+        results["scenes"][scene] = run_scene(scene, shape, args.bands, at)
+        print(f"  {scene} done", file=sys.stderr, flush=True)
+    text = markdown(results)
+    print(text)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "rank_signals.json").write_text(json.dumps(results, indent=1))
+    (out / "rank_signals.md").write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
