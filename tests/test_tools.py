@@ -92,22 +92,38 @@ def test_bench_accuracy_compares_the_default_with_the_full_solver_the_sweep_and_
     assert bench_accuracy.markdown(alone, [5, 20]).count("\n") == 3      # no sweep or rank table without their runs
 
 
-def test_rank_signals_reads_the_band_iterate_the_default_warms_up_with(tmp_path, capsys):
-    rank_signals.main(["--scenes", "leds,target", "--size", "24x32", "--bands", "8", "--at", "5,10", "--out", str(tmp_path)])
+def test_rank_signals_reads_the_default_band_iterate_and_its_largest_gaps(tmp_path, capsys):
+    rank_signals.main(["--scenes", "leds,target", "--size", "24x32", "--bands", "16", "--at", "20,40",
+                       "--out", str(tmp_path)])
     results = json.loads((tmp_path / "rank_signals.json").read_text())["scenes"]
     assert (tmp_path / "rank_signals.md").read_text() == capsys.readouterr().out
-    leds = results["leds"]
-    assert leds["truth"]["rule_rank"] == 3 and leds["truth"]["gaps"][0][0] == 3       # three LED spectra
-    assert list(leds["iterates"]) == ["5", "10"]
-    for signal in leds["iterates"].values():
-        energies = np.array(signal["energies"])
-        assert len(energies) == 4 and np.all(np.diff(energies) <= 0) and energies.sum() <= 1 + 1e-12
-        first, ratio = signal["gaps"][0]
-        assert ratio == pytest.approx(energies[first - 1] / energies[first])
-    sim = rank_signals.simulate(scene="leds", shape=(24, 32), n_bands=8, seed=0)
-    default = rank_signals.Solver(sim.calibration, settings=rank_signals.Settings(iters=5))
-    cube = default.solve(sim.measurement, snapshots=[5]).snapshots[5]
-    assert rank_signals.signals(cube) == leds["iterates"]["5"]       # the default's own warm-up iterate
+    assert results["leds"]["truth"]["rule_rank"] == 3 and results["leds"]["truth"]["gaps"][0][0] == 3   # three LEDs
+    for run in results.values():
+        assert run["final_rank"] == 16 and list(run["iterates"]) == ["20", "40"]       # band space throughout
+        for signal in run["iterates"].values():
+            energies = np.array(signal["energies"])
+            assert len(energies) == 9 and np.all(np.diff(energies) <= 0) and energies.sum() <= 1 + 1e-12
+            ratios = energies[:-1] / energies[1:]
+            assert [j for j, _ in signal["gaps"]] == list(np.argsort(ratios)[::-1][:2] + 1)
+            assert [ratio for _, ratio in signal["gaps"]] == pytest.approx(np.sort(ratios)[::-1][:2])
+    sim = rank_signals.simulate(scene="target", shape=(24, 32), n_bands=16, seed=0)   # still warming up at 40
+    default = rank_signals.Solver(sim.calibration, settings=rank_signals.Settings(iters=40))
+    cube = default.solve(sim.measurement, snapshots=[40]).snapshots[40]
+    assert rank_signals.signals(cube) == results["target"]["iterates"]["40"]
+
+
+def test_rank_signals_counts_round_off_as_zero_and_needs_two_eigenvalues_per_gap():
+    rotation = np.linalg.qr(np.random.default_rng(1).standard_normal((8, 8)))[0]
+    spectra = rotation[:, [0] * 5 + [1] * 3 + [2] * 2]       # three orthonormal spectra on 5, 3 and 2 pixels
+    signal = rank_signals.signals(spectra.reshape(8, 2, 5))
+    assert signal["rule_rank"] == 3
+    assert signal["gaps"][0][0] == 3 and signal["gaps"][0][1] > 1e10           # e_4… are round-off: zero
+    assert signal["gaps"][1] == [1, pytest.approx(0.5 / 0.3)]
+    exact = rank_signals.signals(np.eye(8)[:, [0] * 5 + [1] * 3 + [2] * 2].reshape(8, 2, 5))   # e_4… exactly 0
+    assert exact["gaps"][0] == [3, pytest.approx(0.2 / rank_signals.ROUND_OFF)]
+    assert rank_signals.signals(spectra[:, :5].reshape(8, 1, 5))["gaps"] == [[1, pytest.approx(1e12)]]  # one spectrum
+    assert rank_signals.signals(np.zeros((8, 2, 5)))["gaps"] == []
+    assert len(rank_signals.signals(spectra[:2].reshape(2, 2, 5))["gaps"]) == 1
 
 
 @pytest.mark.opencl

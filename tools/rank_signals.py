@@ -3,14 +3,16 @@
 
     python tools/rank_signals.py --size 320x448 --bands 64 --at 20,30,40,50 --out rank-signals
 
-For each scene, the default solver runs in band space only (``--rank K``: the warm-up the default runs before it
-enters its subspace, the same skips and weights), and at each iteration of ``--at`` the lit unit spectra of the
-iterate's sensor window give the Gram eigenvalues e_1 ≥ e_2 ≥ … (:class:`clsdcam.subspace.Spectra`, normalised
-to sum 1). Printed beside each other:
+For each scene, the default solver runs in band space only (``--rank K``: its warm-up continued, same skips and
+weights; the iterate is the default's own until the default enters its subspace, at a settle check from
+iteration 20 on), and at each iteration of ``--at`` the lit unit spectra of the iterate's sensor window give the
+Gram eigenvalues e_1 ≥ e_2 ≥ … ≥ 0, Σ e_j = 1 (:class:`clsdcam.subspace.Spectra`). Printed beside each other:
 
 * the automatic rule's entry rank, the fewest directions leaving a mean sin² of at most ``ENTRY_TAIL`` outside;
-* the largest eigenvalue gap: the j ≤ K/2 with the largest e_j / e_{j+1}, and the runner-up;
-* the truth's rank: the same rule on the simulated cube's own lit spectra (its content, no reconstruction error).
+* the two largest eigenvalue gaps, ratio_j = e_j / max(e_{j+1}, ROUND_OFF) for j ≤ K/2 with e_j > ROUND_OFF (so a
+  noiseless cube's round-off tail counts as zero and its last direction shows as e_j/1e-12);
+* the truth's rank: the same rule on the simulated cube's own lit spectra (its content, no reconstruction error);
+* the space the run stayed in (``final_rank`` = K: band space).
 
 ``docs/benchmarks.md`` sets these beside the basis size each scene needs (``bench_accuracy.py --ranks``).
 Writes ``rank_signals.json`` and ``rank_signals.md``.
@@ -36,24 +38,23 @@ ROUND_OFF = 1e-12
 
 
 def signals(cube: np.ndarray) -> dict:
-    """The rule's rank, the two largest eigenvalue gaps (rank, ratio) among the first K/2, and e_1…e_K/2
-    (eigenvalues under ROUND_OFF count as zero: a noiseless cube's tail is float64 round-off)."""
+    """The rule's rank, the (at most two) largest eigenvalue gaps [rank j, ratio_j] (see the module docstring), and
+    the eigenvalues the ratios read, e_1…e_{n+1} (n = K/2 ratios, fewer for K < 4)."""
     spectra = Spectra.of_shapes(lit_shapes(cube))
-    half = max(int(cube.shape[0] * MAX_RANK_FRACTION), 1)
-    energies = spectra.energies / max(float(spectra.energies.sum()), np.finfo(float).tiny)
-    ratios = np.where(energies[:half] > ROUND_OFF, energies[:half] / np.maximum(energies[1:half + 1], ROUND_OFF), 0.0)
-    gaps = np.argsort(ratios)[::-1][:2]
-    return {"rule_rank": spectra.rank_for(ENTRY_TAIL), "gaps": [[int(j) + 1, float(ratios[j])] for j in gaps],
-            "energies": [float(e) for e in energies[:half]]}
+    energies = spectra.energies
+    n = min(max(int(cube.shape[0] * MAX_RANK_FRACTION), 1), len(energies) - 1)     # ratios need an e_{j+1}
+    ratios = np.where(energies[:n] > ROUND_OFF, energies[:n] / np.maximum(energies[1:n + 1], ROUND_OFF), 0.0)
+    gaps = [[int(j) + 1, float(ratios[j])] for j in np.argsort(ratios)[::-1][:2] if ratios[j] > 0]
+    return {"rule_rank": spectra.rank_for(ENTRY_TAIL), "gaps": gaps, "energies": [float(e) for e in energies[:n + 1]]}
 
 
 def run_scene(scene: str, shape, bands: int, at) -> dict:
     """The truth's signals and the band iterate's at each iteration of ``at``."""
     sim = simulate(scene=scene, shape=shape, n_bands=bands, seed=0)
     solver = Solver(sim.calibration, settings=Settings(iters=max(at), rank=bands))
-    snapshots = solver.solve(sim.measurement, snapshots=at).snapshots
-    return {"truth": signals(np.asarray(sim.truth)),
-            "iterates": {str(k): signals(cube) for k, cube in sorted(snapshots.items())}}
+    result = solver.solve(sim.measurement, snapshots=at)
+    return {"truth": signals(np.asarray(sim.truth)), "final_rank": result.attrs["final_rank"],
+            "iterates": {str(k): signals(cube) for k, cube in sorted(result.snapshots.items())}}
 
 
 def markdown(results: dict) -> str:
@@ -62,8 +63,8 @@ def markdown(results: dict) -> str:
     for scene, run in results["scenes"].items():
         rows = [("truth", run["truth"])] + list(run["iterates"].items())
         for name, s in rows:
-            (first, r1), (second, r2) = s["gaps"]
-            lines.append(f"| {scene} | {name} | {s['rule_rank']} | {first} ({r1:.3g}) | {second} ({r2:.3g}) |")
+            gaps = [f"{j} ({ratio:.3g})" for j, ratio in s["gaps"]] + ["—"] * (2 - len(s["gaps"]))
+            lines.append(f"| {scene} | {name} | {s['rule_rank']} | {gaps[0]} | {gaps[1]} |")
     return "\n".join(lines)
 
 
@@ -73,15 +74,15 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     shape = tuple(int(v) for v in args.size.split("x"))
     at = [int(k) for k in args.at.split(",")]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     results = {"size": args.size, "bands": args.bands, "entry_tail": ENTRY_TAIL, "scenes": {}}
     for scene in args.scenes.split(","):
         results["scenes"][scene] = run_scene(scene, shape, args.bands, at)
+        (out / "rank_signals.json").write_text(json.dumps(results, indent=1))      # partial results survive a stop
         print(f"  {scene} done", file=sys.stderr, flush=True)
     text = markdown(results)
     print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "rank_signals.json").write_text(json.dumps(results, indent=1))
     (out / "rank_signals.md").write_text(text + "\n")
     return 0
 
