@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from clsdcam.analysis import peak_wavelength
+from clsdcam.cli.options import size
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.sim import noiseless_measurement, shared_data_dir, simulate
 from clsdcam.sim.scenes import source_lines, source_positions
@@ -202,11 +203,17 @@ def markdown(results: dict, marks) -> str:
     return "\n".join(lines)
 
 
+def size_text(shape) -> str:
+    """(H, W) as --size writes it: "HxW" (the results' "size")."""
+    return "x".join(str(n) for n in shape)
+
+
 def panel_parser(description: str, out: str) -> argparse.ArgumentParser:
-    """The options every tool on the panel's scenes takes: --scenes, --size HxW, --bands, --out."""
+    """The options every tool on the panel's scenes takes: --scenes, --size HxW (parsed to (H, W) as the CLI's),
+    --bands, --out."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--scenes", default=",".join(SCENES))
-    parser.add_argument("--size", default="320x448")
+    parser.add_argument("--size", type=size(), default="320x448", metavar="HxW")
     parser.add_argument("--bands", type=int, default=64)
     parser.add_argument("--out", default=out)
     return parser
@@ -221,15 +228,14 @@ def main(argv=None) -> int:
     parser.add_argument("--hand-tv", type=float, default=1e-4, help="--tv of the hand's long --no-skip reference")
     parser.add_argument("--hand-reference-iters", type=int, default=1000)
     args = parser.parse_args(argv)
-    shape = tuple(int(v) for v in args.size.split("x"))
     marks = [int(m) for m in args.marks.split(",")]
     sweep = [float(t) for t in args.sweep.split(",") if t]
     ranks = [int(r) for r in args.ranks.split(",") if r]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    results = {"size": args.size, "bands": args.bands, "marks": marks, "scenes": {}}
+    results = {"size": size_text(args.size), "bands": args.bands, "marks": marks, "scenes": {}}
     for scene in args.scenes.split(","):
-        results["scenes"][scene] = run_scene(scene, shape, args.bands, marks, sweep, ranks)
+        results["scenes"][scene] = run_scene(scene, args.size, args.bands, marks, sweep, ranks)
         (out / "accuracy.json").write_text(json.dumps(results, indent=1))       # partial results survive a stop
     if args.hand:
         results["hand"] = run_hand(marks, sweep, args.hand_reference_iters, args.hand_tv, out)

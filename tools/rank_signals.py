@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_accuracy import panel_parser  # noqa: E402  (the panel's scenes and options)
+from bench_accuracy import panel_parser, size_text  # noqa: E402  (the panel's scenes and options)
 
 from clsdcam.phases import ENTRY_TAIL, MAX_RANK_FRACTION  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
@@ -72,13 +72,12 @@ def main(argv=None) -> int:
     parser = panel_parser(__doc__.splitlines()[0], "rank-signals")
     parser.add_argument("--at", default="20,30,40,50", help="band-space iterations to read the spectra at")
     args = parser.parse_args(argv)
-    shape = tuple(int(v) for v in args.size.split("x"))
     at = [int(k) for k in args.at.split(",")]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    results = {"size": args.size, "bands": args.bands, "entry_tail": ENTRY_TAIL, "scenes": {}}
+    results = {"size": size_text(args.size), "bands": args.bands, "entry_tail": ENTRY_TAIL, "scenes": {}}
     for scene in args.scenes.split(","):
-        results["scenes"][scene] = run_scene(scene, shape, args.bands, at)
+        results["scenes"][scene] = run_scene(scene, args.size, args.bands, at)
         (out / "rank_signals.json").write_text(json.dumps(results, indent=1))      # partial results survive a stop
         print(f"  {scene} done", file=sys.stderr, flush=True)
     text = markdown(results)
