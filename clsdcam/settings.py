@@ -28,7 +28,8 @@ class SolverSettings:
     tol: float = DEFAULT_TOL
     plateau: float = 0.0           # stop when F fell by less than this (relative) between checkpoints
     skip: bool = True              # skip what the scene doesn't need (False: the full solver)
-    rank: int = 0                  # spectral basis vectors: 0 = automatic, ≥ K = no subspace
+    rank: int = 0                  # spectral basis vectors: R < K forces a subspace of R; 0 = as ``subspace`` says
+    subspace: bool = False         # enter a spectral subspace of automatic size (faster; uncertified: see phases)
     dtype: str = "float32"
     objective_every: int = 10      # F(x) evaluated (and the best iterate kept) this often
     restart: bool = True           # adaptive momentum restart (O'Donoghue–Candès)

@@ -12,7 +12,8 @@ cube by s, and the same weights suit any PSF or filter normalisation.
 
 Skips (``skip=True``, the default; ``skip=False`` is the full solver: the paper's field, every
 band, every iteration in band space): the support-sized field, no FFTs for bands no filter
-sees, zero-weight terms never evaluated, and the spectral subspace (see :mod:`clsdcam.phases`).
+sees, zero-weight terms never evaluated; the spectral subspace only when asked (``subspace=True`` or
+``rank``: it is faster but uncertified, see :mod:`clsdcam.phases`).
 Each is reported in ``Result.attrs["skips"]`` with the FFT work it saved.
 """
 from __future__ import annotations

@@ -9,6 +9,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import bench_accuracy  # noqa: E402
 import bench_iteration  # noqa: E402
+import bench_panel  # noqa: E402
 import bench_recon  # noqa: E402
 import rank_signals  # noqa: E402
 
@@ -18,8 +19,9 @@ def test_bench_iteration_times_every_configuration_against_the_authors_and_the_f
     bench_iteration.main(["--size", "24x32", "--bands", "8", "--ranks", "2", "--backends", "numpy",
                           "--repeat", "2", "--json", str(out)])
     result = json.loads(out.read_text())
-    assert set(result["seconds"]) == {"numpy full solver (--no-skip)", "numpy default (automatic rank)",
-                                      "numpy support field, 8 bands", "numpy subspace r = 2", bench_iteration.AUTHORS}
+    assert set(result["seconds"]) == {"numpy full solver (--no-skip)", "numpy --subspace (automatic rank)",
+                                      "numpy default (support field, 8 bands)", "numpy subspace r = 2",
+                                      bench_iteration.AUTHORS}
     assert all(len(samples) == 2 and min(samples) > 0 for samples in result["samples"].values())
     assert result["fields"]["numpy full solver (--no-skip)"] == [48, 64]
     assert set(result["fft_floor"]) == {bench_iteration.PAPER, bench_iteration.OWN}
@@ -148,3 +150,24 @@ def test_check_vkfft_plans_counts_wrong_plans_per_shape(capsys):
     rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and "shape" not in line]
     assert rows[0] == "| 2x21x35 | no, no | 0 of 2 |"                 # 7-smooth: VkFFT's own radices, right
     assert rows[1].startswith("| 1x8x47 | yes, no |")               # 47: Bluestein's algorithm on the W axis
+
+
+def test_bench_panel_draws_fresh_scenes_of_every_kind_and_judges_both_rules(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    bench_panel.main(["--size", "24x32", "--bands", "8", "--scenes", "5", "--marks", "4,8", "--sweep", "3",
+                      "--seed", "7", "--out", str(tmp_path)])
+    results = json.loads((tmp_path / "panel.json").read_text())
+    assert results["seed"] == 7 and [s["kind"] for s in results["scenes"]] == ["piecewise", "natural", "sparse",
+                                                                              "lines", "piecewise"]
+    assert [s["level"] for s in results["scenes"]] == ["standard"] * 4 + ["low light"]
+    for scene in results["scenes"]:
+        chosen = scene["runs"]["default"]["tv_chosen"]
+        fixed = sorted(run["tv_chosen"] for name, run in scene["runs"].items() if name.startswith("--tv "))
+        assert fixed == pytest.approx([chosen / 10, chosen, chosen * 10])
+        assert [p["iteration"] for p in scene["runs"]["--no-skip"]["points"]] == [4, 8]
+    text = capsys.readouterr().out
+    assert text.count("| piecewise | 2 |") == 2 and "| sparse | 1 |" in text and text == (tmp_path / "panel.md").read_text()
+    margins = [bench_panel.rule_margins(s)[0] for s in results["scenes"]]
+    worst = f"{min(m for s, m in zip(results['scenes'], margins) if s['kind'] == 'piecewise'):+.2f}"
+    assert f"| piecewise | 2 | {worst} / " in text
+    assert bench_panel.scene_plan(5, 7) == bench_panel.scene_plan(5, 7) != bench_panel.scene_plan(5, 8)

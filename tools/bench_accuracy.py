@@ -203,16 +203,29 @@ def markdown(results: dict, marks) -> str:
     return "\n".join(lines)
 
 
+def save_json(out: Path, name: str, results: dict):
+    """``out/<name>.json`` (written after every scene too: partial results survive a stop)."""
+    (out / f"{name}.json").write_text(json.dumps(results, indent=1))
+
+
+def report(out: Path, name: str, results: dict, text: str):
+    """The closing table printed and written to ``out/<name>.md``, beside the final ``<name>.json``."""
+    print(text)
+    save_json(out, name, results)
+    (out / f"{name}.md").write_text(text + "\n")
+
+
 def size_text(shape) -> str:
     """(H, W) as --size writes it: "HxW" (the results' "size")."""
     return "x".join(str(n) for n in shape)
 
 
-def panel_parser(description: str, out: str) -> argparse.ArgumentParser:
-    """The options every tool on the panel's scenes takes: --scenes, --size HxW (parsed to (H, W) as the CLI's),
-    --bands, --out."""
+def panel_parser(description: str, out: str, named_scenes: bool = True) -> argparse.ArgumentParser:
+    """The options every tool on the panel's scenes takes: --scenes (the named scenes, unless ``named_scenes`` is
+    False), --size HxW (parsed to (H, W) as the CLI's), --bands, --out."""
     parser = argparse.ArgumentParser(description=description)
-    parser.add_argument("--scenes", default=",".join(SCENES))
+    if named_scenes:
+        parser.add_argument("--scenes", default=",".join(SCENES))
     parser.add_argument("--size", type=size(), default="320x448", metavar="HxW")
     parser.add_argument("--bands", type=int, default=64)
     parser.add_argument("--out", default=out)
@@ -236,13 +249,10 @@ def main(argv=None) -> int:
     results = {"size": size_text(args.size), "bands": args.bands, "marks": marks, "scenes": {}}
     for scene in args.scenes.split(","):
         results["scenes"][scene] = run_scene(scene, args.size, args.bands, marks, sweep, ranks)
-        (out / "accuracy.json").write_text(json.dumps(results, indent=1))       # partial results survive a stop
+        save_json(out, "accuracy", results)
     if args.hand:
         results["hand"] = run_hand(marks, sweep, args.hand_reference_iters, args.hand_tv, out)
-    text = markdown(results, marks)
-    print(text)
-    (out / "accuracy.json").write_text(json.dumps(results, indent=1))
-    (out / "accuracy.md").write_text(text + "\n")
+    report(out, "accuracy", results, markdown(results, marks))
     return 0
 
 

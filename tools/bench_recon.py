@@ -44,6 +44,7 @@ from clsdcam.solver import Settings, Solver  # noqa: E402
 CONFIGS = {  # name -> (backend, Settings fields)
     "numpy": ("numpy", {}),
     "numpy --no-skip": ("numpy", {"skip": False}),
+    "numpy --subspace": ("numpy", {"subspace": True}),
     "opencl": ("opencl", {}),
     "opencl --no-skip": ("opencl", {"skip": False}),
     "numpy float64": ("numpy", {"dtype": "float64"}),

@@ -19,7 +19,6 @@ Writes ``rank_signals.json`` and ``rank_signals.md``.
 """
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -27,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_accuracy import panel_parser, size_text  # noqa: E402  (the panel's scenes and options)
+from bench_accuracy import panel_parser, report, save_json, size_text  # noqa: E402  (the panel's scenes and options)
 
 from clsdcam.phases import ENTRY_TAIL, MAX_RANK_FRACTION  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
@@ -78,11 +77,9 @@ def main(argv=None) -> int:
     results = {"size": size_text(args.size), "bands": args.bands, "entry_tail": ENTRY_TAIL, "scenes": {}}
     for scene in args.scenes.split(","):
         results["scenes"][scene] = run_scene(scene, args.size, args.bands, at)
-        (out / "rank_signals.json").write_text(json.dumps(results, indent=1))      # partial results survive a stop
+        save_json(out, "rank_signals", results)
         print(f"  {scene} done", file=sys.stderr, flush=True)
-    text = markdown(results)
-    print(text)
-    (out / "rank_signals.md").write_text(text + "\n")
+    report(out, "rank_signals", results, markdown(results))
     return 0
 
 

@@ -131,7 +131,10 @@ def add_solver_options(p: argparse.ArgumentParser):
     p.add_argument("--plateau", type=number, default=0.0,
                    help="stop when the objective fell by less than this (relative) over its last check (default: off)")
     p.add_argument("--rank", type=non_negative_int, default=0, metavar="R",
-                   help="solve for R spectral basis vectors instead of the bands (default 0: chosen automatically)")
+                   help="solve for R spectral basis vectors instead of the bands (default 0: as --subspace says)")
+    p.add_argument("--subspace", action="store_true",
+                   help="enter a spectral subspace of automatic size once the spectra settle: faster, but it can "
+                        "cost spectral angle on scenes with many smooth, overlapping spectra (default: band space)")
     p.add_argument("--no-skip", action="store_true",
                    help="the full solver: the paper's 2H×2W field, every band, no spectral subspace")
     add_backend_options(p)
@@ -212,7 +215,8 @@ def settings_from(args):
     from ..settings import Settings
 
     return Settings(iters=args.iters, tv_weights=args.tv_weights, tol=args.tol, plateau=args.plateau, rank=args.rank,
-                    skip=not args.no_skip, dtype=args.dtype, full_field=getattr(args, "full_field", False),
+                    subspace=args.subspace, skip=not args.no_skip, dtype=args.dtype,
+                    full_field=getattr(args, "full_field", False),
                     **{row.name: getattr(args, row.name) for row in PRIORS})
 
 

@@ -80,7 +80,8 @@ def noiseless_measurement(psf: np.ndarray, filters: np.ndarray, cube: np.ndarray
 
 def simulate(scene: str = "target", shape=None, n_bands: int | None = None, seed: int = 0,
              noise_var: float = 1e-5, photons: float | None = 20000.0,
-             psf: np.ndarray | None = None, filters: np.ndarray | None = None) -> Simulation:
+             psf: np.ndarray | None = None, filters: np.ndarray | None = None,
+             cube: np.ndarray | None = None) -> Simulation:
     """Simulate one Spectral DiffuserCam frame.
 
     shape (default 320 × 448) and n_bands (default 64) come from ``psf``/``filters`` when
@@ -88,13 +89,14 @@ def simulate(scene: str = "target", shape=None, n_bands: int | None = None, seed
     :func:`band_wavelengths`, all seeded by ``seed``. Noise (see :func:`add_noise`): shot
     noise at ``photons`` at the peak (default 20 000, a small pixel's full well), then
     Gaussian read noise of variance ``noise_var`` relative to the peak² (default 1e-5,
-    σ ≈ 0.3 % of the peak); the measurement is clipped at 0.
+    σ ≈ 0.3 % of the peak); the measurement is clipped at 0. ``cube``: a (K, H, W) scene to image instead of
+    the named one (e.g. :func:`clsdcam.sim.kinds.make_kind`'s; ``scene`` then only names it).
     """
     shape, n_bands = resolve_geometry(shape, n_bands, psf, filters)
     wavelengths = band_wavelengths(n_bands)
     psf = caustic_psf(shape, seed) if psf is None else np.asarray(psf, dtype=np.float32)
     filters = filter_array(shape, wavelengths, seed) if filters is None else np.asarray(filters, dtype=np.float32)
-    truth = make_scene(scene, shape, wavelengths, seed)
+    truth = make_scene(scene, shape, wavelengths, seed) if cube is None else np.asarray(cube, np.float32)
     clean = noiseless_measurement(psf, filters, truth)
     noisy = add_noise(clean, np.random.default_rng(seed), noise_var, photons)
     measurement = np.maximum(noisy, 0.0).astype(np.float32)

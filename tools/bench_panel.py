@@ -1,0 +1,148 @@
+#!/usr/bin/env python3
+"""Randomised accuracy panel: the default solver against the full solver (``--no-skip``) and against a sweep of
+fixed TV weights, on random scenes of every kind (:mod:`clsdcam.sim.kinds`) at two noise levels.
+
+    python tools/bench_panel.py --size 128x160 --bands 64 --scenes 20 --marks 50,100,300 --out panel
+
+Every run draws fresh seeds (``--seed`` replays one: it is printed and recorded), so the panel cannot be tuned
+on: each scene is a new layout, new spectra, a new PSF and filter array (the simulator's, from the scene's seed)
+and new noise. Scene i is of kind ``KINDS[i mod 5]`` at noise level ``LEVELS[(i div 5) mod 2]``.
+
+The rules, at every mark (accuracy.md's, permanent): the default's PSNR ≥ ``--no-skip``'s − 0.2 dB and its mean
+spectral angle ≤ ``--no-skip``'s + 0.5°. The weight's rule, at the last mark: the default's PSNR ≥ the best fixed
+weight's − 0.5 dB and its angle ≤ that run's + 1°, the fixed weights spanning a decade either side of the one
+the default chose (``--sweep`` points, log-spaced). Per kind the table gives the worst and the median margin
+(positive: the rule holds by that much). Writes ``panel.json`` after every scene and ``panel.md``.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from bench_accuracy import (ANGLE_MARGIN_DEG, PSNR_MARGIN_DB, panel_parser, report, save_json, scene_points, size_text,
+                            solve)
+from clsdcam.sim import band_wavelengths, simulate
+from clsdcam.sim.kinds import KINDS, make_kind
+
+LEVELS = {"standard": {"noise_var": 1e-5, "photons": 2e4}, "low light": {"noise_var": 1e-4, "photons": 2e3}}
+SWEEP_PSNR_DB, SWEEP_ANGLE_DEG = 0.5, 1.0
+
+
+def scene_plan(count: int, seed: int) -> list[dict]:
+    """Scene i: its kind, noise level and own seed (from ``seed``'s SeedSequence)."""
+    kinds, levels = list(KINDS), list(LEVELS)
+    seeds = np.random.SeedSequence(seed).generate_state(count)
+    return [{"kind": kinds[i % len(kinds)], "level": levels[(i // len(kinds)) % len(levels)], "seed": int(s)}
+            for i, s in enumerate(seeds)]
+
+
+def sweep_weights(chosen: float, points: int) -> list[float]:
+    """``points`` fixed weights log-spaced over a decade either side of ``chosen``."""
+    return [float(chosen * 10.0 ** e) for e in np.linspace(-1.0, 1.0, points)]
+
+
+def run_scene(plan: dict, shape, bands: int, marks, points: int) -> dict:
+    wavelengths = band_wavelengths(bands)
+    cube = make_kind(plan["kind"], shape, wavelengths, plan["seed"])
+    sim = simulate(scene=plan["kind"], shape=shape, n_bands=bands, seed=plan["seed"] % 2 ** 31, cube=cube,
+                   **LEVELS[plan["level"]])
+    runs = {}
+    for name, fields in {"default": {}, "--no-skip": {"skip": False}}.items():
+        runs[name] = run(sim, fields, marks)
+    for tau in sweep_weights(runs["default"]["tv_chosen"], points) if points else ():
+        runs[f"--tv {tau:.3g}"] = run(sim, {"tv": tau}, marks[-1:])
+    return {**plan, "runs": runs}
+
+
+def run(sim, fields: dict, marks) -> dict:
+    snapshots, attrs = solve(sim.calibration, sim.measurement, fields, marks)
+    return {"points": scene_points("", sim, snapshots), **attrs}
+
+
+def rule_margins(scene: dict) -> tuple[float, float]:
+    """(PSNR margin dB, angle margin °) of the default against --no-skip: the smallest over the marks."""
+    pairs = list(zip(scene["runs"]["default"]["points"], scene["runs"]["--no-skip"]["points"]))
+    return (min(d["psnr"] - f["psnr"] + PSNR_MARGIN_DB for d, f in pairs),
+            min(f["angle"] - d["angle"] + ANGLE_MARGIN_DEG for d, f in pairs))
+
+
+def sweep_margins(scene: dict) -> tuple[float, float] | None:
+    """(PSNR margin dB, angle margin °) of the default's weight against the sweep's best fixed weight (by PSNR)
+    at the last mark; None without a sweep."""
+    fixed = [r for name, r in scene["runs"].items() if name.startswith("--tv ")]
+    if not fixed:
+        return None
+    best = max(fixed, key=lambda r: r["points"][-1]["psnr"])
+    own = scene["runs"]["default"]["points"][-1]
+    return (own["psnr"] - best["points"][-1]["psnr"] + SWEEP_PSNR_DB,
+            best["points"][-1]["angle"] - own["angle"] + SWEEP_ANGLE_DEG)
+
+
+def kind_rows(results: dict, margins, label: str) -> list[str]:
+    """Per kind: scenes, the worst and the median of both margins, and whether every scene passes."""
+    rows = [f"| kind | scenes | {label}: worst / median PSNR margin | worst / median angle margin | every scene |",
+            "|---|---:|---|---|---|"]
+    for kind in KINDS:
+        found = [m for s in results["scenes"] if s["kind"] == kind for m in [margins(s)] if m is not None]
+        if found:
+            psnrs, angles = np.array(found).T
+            rows.append(f"| {kind} | {len(found)} | {psnrs.min():+.2f} / {np.median(psnrs):+.2f} dB | "
+                        f"{angles.min():+.2f} / {np.median(angles):+.2f}° | "
+                        f"{'passes' if min(psnrs.min(), angles.min()) >= 0 else 'FAILS'} |")
+    return rows
+
+
+def scene_rows(results: dict) -> list[str]:
+    rows = ["| # | kind | noise | seed | τ chosen | default, last mark | --no-skip | best fixed τ: PSNR / SA | "
+            "rank |", "|---:|---|---|---|---:|---|---|---|---:|"]
+    for i, s in enumerate(results["scenes"]):
+        d, f = (s["runs"][n] for n in ("default", "--no-skip"))
+        fixed = {n: r for n, r in s["runs"].items() if n.startswith("--tv ")}
+        best = max(fixed, key=lambda n: fixed[n]["points"][-1]["psnr"]) if fixed else None
+        rows.append(f"| {i} | {s['kind']} | {s['level']} | {s['seed']} | {d['tv_chosen']:.3g} | {point(d)} | "
+                    f"{point(f)} | " + (f"{best[5:]}: {point(fixed[best])}" if best else "–") +
+                    f" | {d.get('final_rank', '')} |")
+    return rows
+
+
+def point(run: dict) -> str:
+    last = run["points"][-1]
+    return f"{last['psnr']:.2f} dB / {last['angle']:.2f}°"
+
+
+def markdown(results: dict) -> str:
+    lines = [f"Seed {results['seed']}, {results['size']}×{results['bands']}, marks {results['marks']}.", "",
+             "The default against `--no-skip` at every mark (margins ≥ 0 pass: PSNR ≥ full − 0.2 dB, "
+             "SA ≤ full + 0.5°):", ""] + kind_rows(results, rule_margins, "rule")
+    if any(sweep_margins(s) for s in results["scenes"]):
+        lines += ["", "The chosen weight against the sweep's best fixed weight at the last mark (margins ≥ 0 pass: "
+                  "PSNR ≥ best − 0.5 dB, SA ≤ its + 1°):", ""] + kind_rows(results, sweep_margins, "weight")
+    return "\n".join(lines + ["", "Every scene:", ""] + scene_rows(results))
+
+
+def main(argv=None) -> int:
+    parser = panel_parser(__doc__.splitlines()[0], "panel", named_scenes=False)
+    parser.set_defaults(size=(128, 160))
+    parser.add_argument("--scenes", type=int, default=20, help="random scenes (kinds in turn; default 20)")
+    parser.add_argument("--marks", default="50,100,300")
+    parser.add_argument("--sweep", type=int, default=5, help="fixed weights a decade either side (0: no sweep)")
+    parser.add_argument("--seed", type=int, default=None, help="replay a panel (default: fresh entropy)")
+    args = parser.parse_args(argv)
+    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
+    marks = [int(m) for m in args.marks.split(",")]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "marks": marks, "scenes": []}
+    print(f"panel seed {seed}", file=sys.stderr, flush=True)
+    for i, plan in enumerate(scene_plan(args.scenes, seed)):
+        results["scenes"].append(run_scene(plan, args.size, args.bands, marks, args.sweep))
+        print(f"  scene {i + 1}/{args.scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
+        save_json(out, "panel", results)
+    report(out, "panel", results, markdown(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
