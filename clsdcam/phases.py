@@ -3,7 +3,7 @@ scene's spectra have settled.
 
 The default stays in band space: no signal read during a solve certifies that a basis holds the spectra the full
 problem would find (on scenes of many smooth, overlapping spectra the automatic subspace cost 3.6–5.1° of
-spectral angle at full size, with a basis of 21 vectors for 8–12 true spectra), and the accuracy rule
+spectral angle at full size, with a basis of 21 vectors for 8 true spectra), and the accuracy rule
 (docs/accuracy.md) admits no loss. ``Settings.subspace`` turns the automatic subspace on, as a speed option.
 
 The basis is read from the spectra as the spectral angle weighs them: the unit spectra of the lit pixels

@@ -15,7 +15,7 @@ from .errors import InputError
 from .priors import AUTO, PRIORS
 
 DEFAULT_ITERS = 300
-COLD_ITERS = 40     # a stream's cold start (a batch chunk's first frame): what reaches a cold solve's accuracy
+COLD_ITERS = 40     # a stream's cold start (a batch chunk's first frame): what reached a cold solve's accuracy (with --subspace, docs/batch.md)
 DEFAULT_TOL = 0.0
 
 

@@ -3,8 +3,9 @@
 * field: the scene area the PSF cannot bring onto the sensor is not part of the problem
   (support-sized field, :func:`clsdcam.geometry.support_geometry`);
 * bands: a band no pixel's filter sees adds nothing to b and gets no gradient: no FFTs for it;
-* subspace: when the scene's spectra span few dimensions, r spectral basis vectors instead of
-  K bands (:mod:`clsdcam.subspace`): 4r FFTs per iteration instead of 4K;
+* subspace (``--subspace`` or ``--rank``; off by default, docs/accuracy.md): when the scene's spectra span few
+  dimensions, r spectral basis vectors instead of K bands (:mod:`clsdcam.subspace`): 4r FFTs per iteration
+  instead of 4K;
 * terms: a regulariser with zero weight is never evaluated.
 
 Work is counted in 2-D FFT voxels (transforms × field size), against the full solver's: the

@@ -1,8 +1,8 @@
 """What one solve leaves to the next frame of a stream on the same solver (``Result.state``).
 
 A video's frames differ little: the next solve starts from the last field (the whole field, not only
-the sensor window), enters the spectral basis the last one ended in at once (no band-space warm-up, the
-rank kept), starts with the step it ended with (back-offs carried) and keeps the prior weights it chose
+the sensor window), enters the spectral basis the last one ended in at once, if it ended in one (``--subspace``
+or ``--rank``: no band-space warm-up, the rank kept), starts with the step it ended with (back-offs carried) and keeps the prior weights it chose
 (an ``auto`` weight is not estimated again). Momentum starts afresh: the objective is a new one.
 """
 from __future__ import annotations

@@ -50,3 +50,10 @@ def test_a_kind_scene_is_imaged_by_the_simulator():
 def test_an_unknown_kind_is_refused():
     with pytest.raises(InputError, match="expected one of"):
         make_kind("galaxy", SHAPE, WAVELENGTHS, seed=0)
+
+
+def test_a_sensor_too_small_for_a_kind_or_a_cube_of_the_wrong_shape_is_refused():
+    with pytest.raises(InputError, match="too small"):
+        make_kind("natural", (6, 12), WAVELENGTHS, seed=0)
+    with pytest.raises(InputError, match="expected"):
+        simulate(scene="sparse", shape=SHAPE, n_bands=16, seed=0, cube=make_kind("sparse", SHAPE, WAVELENGTHS, 0))

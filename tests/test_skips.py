@@ -30,7 +30,7 @@ def entry(result) -> int:
 def test_the_default_keeps_band_space_and_the_full_solvers_spectra_on_many_smooth_spectra():
     """The accuracy rule (docs/accuracy.md): the automatic subspace cannot be certified on scenes of many smooth,
     overlapping spectra (3.6–5.1° lost at full size), so the default solves in band space, the full problem on the
-    support field: the same cube as ``--no-skip`` to float32 rounding, far inside the rule's margins."""
+    support field: ``--no-skip``'s cube but for the PSF tail the support drops, far inside the rule's margins."""
     shape = (48, 64)
     sim = simulate(scene="piecewise", shape=shape, n_bands=64, seed=0,
                    cube=make_kind("piecewise", shape, band_wavelengths(64), 0))
@@ -41,7 +41,7 @@ def test_the_default_keeps_band_space_and_the_full_solvers_spectra_on_many_smoot
     assert abs(spectral_angle(default.cube, sim.truth) - spectral_angle(full.cube, sim.truth)) < 0.05
 
 
-def test_default_solves_three_led_spectra_in_a_small_subspace_at_least_as_well(leds):
+def test_the_subspace_solves_three_led_spectra_in_a_few_directions_at_least_as_well(leds):
     """With ``--subspace``: band space until the spectra settle, then a subspace: no worse than the full solver in PSNR (−0.2 dB) or
     spectral angle (+0.5°), and cheaper."""
     full, fast = solve(leds, iters=150, skip=False), solve(leds, iters=150)

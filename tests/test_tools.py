@@ -171,3 +171,4 @@ def test_bench_panel_draws_fresh_scenes_of_every_kind_and_judges_both_rules(tmp_
     worst = f"{min(m for s, m in zip(results['scenes'], margins) if s['kind'] == 'piecewise'):+.2f}"
     assert f"| piecewise | 2 | {worst} / " in text
     assert bench_panel.scene_plan(5, 7) == bench_panel.scene_plan(5, 7) != bench_panel.scene_plan(5, 8)
+    assert (tmp_path / "panel.png").stat().st_size > 0

@@ -9,8 +9,8 @@ single-pixel 10 nm lines, with each source's peak-wavelength error) and narrow l
 bin boundaries and one faint (``lines``). A scene passes when, at every mark, the default's PSNR is at least
 the full solver's − 0.2 dB and its spectral angle at most the full solver's + 0.5°. ``--sweep`` adds the
 default solver at fixed ``--tv`` weights (the best of them against the default's weight choice), ``--ranks`` at
-fixed ``--rank`` sizes (what each basis size costs in seconds and gives in accuracy, beside the automatic rule's
-final rank). ``--hand``
+fixed ``--rank`` sizes (what each basis size costs in seconds and gives in accuracy, beside the default's band
+space). ``--hand``
 adds the DiffuserCam tutorial's hand (``../shared/data``; dark corner subtracted, binned 4×): correlation of
 each run with a long ``--no-skip`` run at ``--hand-tv``. Writes ``accuracy.json`` and ``accuracy.md``.
 """

@@ -12,7 +12,9 @@ The rules, at every mark (accuracy.md's, permanent): the default's PSNR ≥ ``--
 spectral angle ≤ ``--no-skip``'s + 0.5°. The weight's rule, at the last mark: the default's PSNR ≥ the best fixed
 weight's − 0.5 dB and its angle ≤ that run's + 1°, the fixed weights spanning a decade either side of the one
 the default chose (``--sweep`` points, log-spaced). Per kind the table gives the worst and the median margin
-(positive: the rule holds by that much). Writes ``panel.json`` after every scene and ``panel.md``.
+(positive: the rule holds by that much). Writes ``panel.json`` after every scene, ``panel.md`` and ``panel.png``
+(both rules' margins, every scene, one colour a kind). Without real cubes in ``../shared/data`` the ``real`` kind is
+left out (said on stderr).
 """
 from __future__ import annotations
 
@@ -23,16 +25,16 @@ import numpy as np
 
 from bench_accuracy import (ANGLE_MARGIN_DEG, PSNR_MARGIN_DB, panel_parser, report, save_json, scene_points, size_text,
                             solve)
-from clsdcam.sim import band_wavelengths, simulate
-from clsdcam.sim.kinds import KINDS, make_kind
+from clsdcam.sim import band_wavelengths, shared_data_dir, simulate
+from clsdcam.sim.kinds import KINDS, make_kind, real_cubes
 
 LEVELS = {"standard": {"noise_var": 1e-5, "photons": 2e4}, "low light": {"noise_var": 1e-4, "photons": 2e3}}
 SWEEP_PSNR_DB, SWEEP_ANGLE_DEG = 0.5, 1.0
 
 
-def scene_plan(count: int, seed: int) -> list[dict]:
-    """Scene i: its kind, noise level and own seed (from ``seed``'s SeedSequence)."""
-    kinds, levels = list(KINDS), list(LEVELS)
+def scene_plan(count: int, seed: int, kinds=tuple(KINDS)) -> list[dict]:
+    """Scene i: its kind (``kinds`` in turn), noise level and own seed (from ``seed``'s SeedSequence)."""
+    levels = list(LEVELS)
     seeds = np.random.SeedSequence(seed).generate_state(count)
     return [{"kind": kinds[i % len(kinds)], "level": levels[(i // len(kinds)) % len(levels)], "seed": int(s)}
             for i, s in enumerate(seeds)]
@@ -46,7 +48,7 @@ def sweep_weights(chosen: float, points: int) -> list[float]:
 def run_scene(plan: dict, shape, bands: int, marks, points: int) -> dict:
     wavelengths = band_wavelengths(bands)
     cube = make_kind(plan["kind"], shape, wavelengths, plan["seed"])
-    sim = simulate(scene=plan["kind"], shape=shape, n_bands=bands, seed=plan["seed"] % 2 ** 31, cube=cube,
+    sim = simulate(scene=f"kind:{plan['kind']}", shape=shape, n_bands=bands, seed=plan["seed"] % 2 ** 31, cube=cube,
                    **LEVELS[plan["level"]])
     runs = {}
     for name, fields in {"default": {}, "--no-skip": {"skip": False}}.items():
@@ -122,6 +124,30 @@ def markdown(results: dict) -> str:
     return "\n".join(lines + ["", "Every scene:", ""] + scene_rows(results))
 
 
+def plot(results: dict, path: Path):
+    """``panel.png``: every scene's two margins (PSNR, angle) for each rule, one colour a kind; a scene passes a
+    rule when its point lies in the upper right quadrant."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 4.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    rules = [("default against --no-skip, worst mark", rule_margins),
+             ("chosen weight against the best fixed weight", sweep_margins)]
+    for ax, (title, margins) in zip(fig.subplots(1, 2), rules):
+        for kind in KINDS:
+            found = [m for s in results["scenes"] if s["kind"] == kind for m in [margins(s)] if m is not None]
+            if found:
+                ax.scatter(*np.array(found).T, label=kind, alpha=0.8)
+        ax.axhline(0, color="k", lw=0.8)
+        ax.axvline(0, color="k", lw=0.8)
+        ax.set(title=title, xlabel="PSNR margin (dB)", ylabel="spectral angle margin (°)")
+    fig.axes[0].legend(fontsize=8)
+    fig.suptitle(f"Randomised panel, seed {results['seed']}, {results['size']}×{results['bands']}: "
+                 "margins ≥ 0 pass", fontsize=10)
+    fig.savefig(path, dpi=100)
+
+
 def main(argv=None) -> int:
     parser = panel_parser(__doc__.splitlines()[0], "panel", named_scenes=False)
     parser.set_defaults(size=(128, 160))
@@ -130,17 +156,21 @@ def main(argv=None) -> int:
     parser.add_argument("--sweep", type=int, default=5, help="fixed weights a decade either side (0: no sweep)")
     parser.add_argument("--seed", type=int, default=None, help="replay a panel (default: fresh entropy)")
     args = parser.parse_args(argv)
+    kinds = [kind for kind in KINDS if kind != "real" or real_cubes(shared_data_dir())]
+    if "real" in KINDS and "real" not in kinds:
+        print("kind 'real' left out: no real cube in ../shared/data (or $CLSDCAM_DATA)", file=sys.stderr)
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
-    marks = [int(m) for m in args.marks.split(",")]
+    marks = sorted(int(m) for m in args.marks.split(","))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "marks": marks, "scenes": []}
     print(f"panel seed {seed}", file=sys.stderr, flush=True)
-    for i, plan in enumerate(scene_plan(args.scenes, seed)):
+    for i, plan in enumerate(scene_plan(args.scenes, seed, kinds)):
         results["scenes"].append(run_scene(plan, args.size, args.bands, marks, args.sweep))
         print(f"  scene {i + 1}/{args.scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
         save_json(out, "panel", results)
     report(out, "panel", results, markdown(results))
+    plot(results, out / "panel.png")
     return 0
 
 

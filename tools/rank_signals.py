@@ -4,7 +4,7 @@
     python tools/rank_signals.py --size 320x448 --bands 64 --at 20,30,40,50 --out rank-signals
 
 For each scene, the default solver runs in band space only (``--rank K``: its warm-up continued, same skips and
-weights; the iterate is the default's own until the default enters its subspace, at a settle check from
+weights; the iterate is ``--subspace``'s own until it enters its subspace, at a settle check from
 iteration 20 on), and at each iteration of ``--at`` the lit unit spectra of the iterate's sensor window give the
 Gram eigenvalues e_1 ≥ e_2 ≥ … ≥ 0, Σ e_j = 1 (:class:`clsdcam.subspace.Spectra`). Printed beside each other:
 

@@ -3,7 +3,7 @@
 Stream. Frames [s, e) are one stream on one solver. The first frame (and any frame after a failed
 one) is a cold start with the cold budget (``BatchSpec.budget``); every later frame is warm: it starts
 from the previous frame's solver state (:mod:`clsdcam.state`: the whole field, the spectral basis and
-rank, the step, the prior weights: no band-space warm-up, no new weight estimate), its field moved by
+rank if it ended in a subspace, the step, the prior weights: no band-space warm-up, no new weight estimate), its field moved by
 the drift seen between x̂_{i−2} and x̂_{i−1} (:func:`clsdcam.batch.motion.predict_state`), and runs
 ``settings.iters`` iterations. Frame i+1 is read by a reader thread and cube i−1 written by a writer
 thread while frame i is solved, so only about three frames are in memory whatever the stream's length.

@@ -134,7 +134,8 @@ def add_solver_options(p: argparse.ArgumentParser):
                    help="solve for R spectral basis vectors instead of the bands (default 0: as --subspace says)")
     p.add_argument("--subspace", action="store_true",
                    help="enter a spectral subspace of automatic size once the spectra settle: faster, but it can "
-                        "cost spectral angle on scenes with many smooth, overlapping spectra (default: band space)")
+                        "cost spectral angle on scenes with many smooth, overlapping spectra (default: band space; "
+                        "ignored with --no-skip)")
     p.add_argument("--no-skip", action="store_true",
                    help="the full solver: the paper's 2H×2W field, every band, no spectral subspace")
     add_backend_options(p)

@@ -97,6 +97,8 @@ def simulate(scene: str = "target", shape=None, n_bands: int | None = None, seed
     psf = caustic_psf(shape, seed) if psf is None else np.asarray(psf, dtype=np.float32)
     filters = filter_array(shape, wavelengths, seed) if filters is None else np.asarray(filters, dtype=np.float32)
     truth = make_scene(scene, shape, wavelengths, seed) if cube is None else np.asarray(cube, np.float32)
+    if truth.shape != (n_bands,) + tuple(shape):
+        raise InputError(f"cube {truth.shape}: expected {(n_bands,) + tuple(shape)} (bands, height, width)")
     clean = noiseless_measurement(psf, filters, truth)
     noisy = add_noise(clean, np.random.default_rng(seed), noise_var, photons)
     measurement = np.maximum(noisy, 0.0).astype(np.float32)

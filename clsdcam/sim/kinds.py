@@ -12,7 +12,7 @@ nm (:func:`random_spectrum`), band-averaged; narrow lines (the ``lines`` and ``s
   (random image, crop and flip), with 4–12 spectra softly mixed: each pixel's abundances fall off with its colour's
   distance from each spectrum's colour, times the photograph's luminance.
 - ``sparse``: 5–40 small sources (a pixel or a disc of radius ≤ 2), narrow or broad, on a dim broad background
-  whose brightness varies smoothly (2–10 % of the sources').
+  whose brightness varies smoothly (1–10 % of the peak).
 - ``lines``: spots on a jittered grid, each with one of 3–8 narrow lines.
 - ``real``: a real cube (``../shared/data``: Samson, Jasper Ridge to 900 nm, CarbonBee's leaf), a random crop,
   flip and transposition, interpolated to the bands (clamped at its range's ends).
@@ -34,6 +34,7 @@ from .spectra import band_average, gaussian_line
 BROAD_FWHM, NARROW_FWHM = (30.0, 150.0), (4.0, 16.0)      # nm
 PHOTOS = ("astronaut", "chelsea", "coffee", "rocket", "hubble_deep_field", "immunohistochemistry", "retina")
 JASPER_TOP_NM = 900.0
+MIN_INNER_PX = 8                       # a kind's scene needs this much room inside the zero border
 LEAF_RANGE_NM = (400.0, 1000.0)        # CarbonBee's leaf: 80 bands, not in the file (its tool's defaults)
 
 
@@ -85,8 +86,8 @@ def photo(box, rng: np.random.Generator) -> np.ndarray:
 
     image = getattr(skimage.data, PHOTOS[rng.integers(len(PHOTOS))])()[..., :3].astype(np.float64) / 255.0
     side = rng.uniform(0.5, 1.0)
-    ch = int(min(image.shape[0], image.shape[1] * box[0] / box[1]) * side)
-    cw = int(ch * box[1] / box[0])
+    ch = max(1, int(min(image.shape[0], image.shape[1] * box[0] / box[1]) * side))
+    cw = max(1, min(image.shape[1], int(ch * box[1] / box[0])))
     top, left = rng.integers(0, image.shape[0] - ch + 1), rng.integers(0, image.shape[1] - cw + 1)
     crop = image[top:top + ch, left:left + cw]
     crop = crop[:, ::-1] if rng.random() < 0.5 else crop
@@ -177,8 +178,8 @@ def real_kind(shape, wavelengths, rng) -> np.ndarray:
     raw = raw.transpose(1, 0, 2) if rng.random() < 0.5 else raw
     box = inner_shape(shape)
     side = rng.uniform(0.6, 1.0)
-    ch = int(min(raw.shape[0], raw.shape[1] * box[0] / box[1]) * side)
-    cw = max(1, int(ch * box[1] / box[0]))
+    ch = max(1, int(min(raw.shape[0], raw.shape[1] * box[0] / box[1]) * side))
+    cw = max(1, min(raw.shape[1], int(ch * box[1] / box[0])))
     top, left = rng.integers(0, raw.shape[0] - ch + 1), rng.integers(0, raw.shape[1] - cw + 1)
     crop = np.maximum(raw[top:top + ch, left:left + cw], 0.0)
     crop = crop[::-1] if rng.random() < 0.5 else crop
@@ -196,6 +197,9 @@ def make_kind(kind: str, shape, wavelengths, seed: int) -> np.ndarray:
     """A random scene of ``kind`` (K, H, W) float32 ≥ 0, zero in the border, peak 1, drawn from ``seed``."""
     if kind not in KINDS:
         raise InputError(f"kind {kind!r}: expected one of {', '.join(KINDS)}")
+    if min(inner_shape(shape)) < MIN_INNER_PX:
+        raise InputError(f"kind {kind!r}: the sensor {tuple(shape)} is too small (at least {MIN_INNER_PX} px inside "
+                         "the border each way)")
     cube = KINDS[kind](tuple(shape), np.asarray(wavelengths, np.float64), np.random.default_rng(seed))
     if not cube.max() > 0:
         raise InputError(f"kind {kind!r}: the sensor {tuple(shape)} is too small to hold it")
