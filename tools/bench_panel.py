@@ -70,16 +70,26 @@ def rule_margins(scene: dict) -> tuple[float, float]:
             min(f["angle"] - d["angle"] + ANGLE_MARGIN_DEG for d, f in pairs))
 
 
+def best_fixed(scene: dict) -> tuple[str, dict] | None:
+    """(name, run) of the sweep's best fixed weight by PSNR at the last mark; None without a sweep."""
+    fixed = [(name, r) for name, r in scene["runs"].items() if name.startswith("--tv ")]
+    return max(fixed, key=lambda item: item[1]["points"][-1]["psnr"]) if fixed else None
+
+
 def sweep_margins(scene: dict) -> tuple[float, float] | None:
     """(PSNR margin dB, angle margin °) of the default's weight against the sweep's best fixed weight (by PSNR)
     at the last mark; None without a sweep."""
-    fixed = [r for name, r in scene["runs"].items() if name.startswith("--tv ")]
-    if not fixed:
+    found = best_fixed(scene)
+    if found is None:
         return None
-    best = max(fixed, key=lambda r: r["points"][-1]["psnr"])
-    own = scene["runs"]["default"]["points"][-1]
+    best, own = found[1], scene["runs"]["default"]["points"][-1]
     return (own["psnr"] - best["points"][-1]["psnr"] + SWEEP_PSNR_DB,
             best["points"][-1]["angle"] - own["angle"] + SWEEP_ANGLE_DEG)
+
+
+def kind_margins(results: dict, kind: str, margins) -> list[tuple[float, float]]:
+    """``margins(scene)`` of every scene of ``kind`` that has them."""
+    return [m for s in results["scenes"] if s["kind"] == kind for m in [margins(s)] if m is not None]
 
 
 def kind_rows(results: dict, margins, label: str) -> list[str]:
@@ -87,7 +97,7 @@ def kind_rows(results: dict, margins, label: str) -> list[str]:
     rows = [f"| kind | scenes | {label}: worst / median PSNR margin | worst / median angle margin | every scene |",
             "|---|---:|---|---|---|"]
     for kind in KINDS:
-        found = [m for s in results["scenes"] if s["kind"] == kind for m in [margins(s)] if m is not None]
+        found = kind_margins(results, kind, margins)
         if found:
             psnrs, angles = np.array(found).T
             rows.append(f"| {kind} | {len(found)} | {psnrs.min():+.2f} / {np.median(psnrs):+.2f} dB | "
@@ -101,10 +111,9 @@ def scene_rows(results: dict) -> list[str]:
             "rank |", "|---:|---|---|---|---:|---|---|---|---:|"]
     for i, s in enumerate(results["scenes"]):
         d, f = (s["runs"][n] for n in ("default", "--no-skip"))
-        fixed = {n: r for n, r in s["runs"].items() if n.startswith("--tv ")}
-        best = max(fixed, key=lambda n: fixed[n]["points"][-1]["psnr"]) if fixed else None
+        best = best_fixed(s)
         rows.append(f"| {i} | {s['kind']} | {s['level']} | {s['seed']} | {d['tv_chosen']:.3g} | {point(d)} | "
-                    f"{point(f)} | " + (f"{best[5:]}: {point(fixed[best])}" if best else "–") +
+                    f"{point(f)} | " + (f"{best[0][5:]}: {point(best[1])}" if best else "–") +
                     f" | {d.get('final_rank', '')} |")
     return rows
 
@@ -136,7 +145,7 @@ def plot(results: dict, path: Path):
              ("chosen weight against the best fixed weight", sweep_margins)]
     for ax, (title, margins) in zip(fig.subplots(1, 2), rules):
         for kind in KINDS:
-            found = [m for s in results["scenes"] if s["kind"] == kind for m in [margins(s)] if m is not None]
+            found = kind_margins(results, kind, margins)
             if found:
                 ax.scatter(*np.array(found).T, label=kind, alpha=0.8)
         ax.axhline(0, color="k", lw=0.8)

@@ -27,8 +27,8 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from ..errors import InputError
-from .scenes import (envi_wavelengths, in_window, inner_shape, inner_window, read_samson, resample_spectra,
-                     shared_data_dir)
+from .scenes import (compose, disc_masks, envi_wavelengths, in_window, inner_shape, inner_window, read_samson,
+                     resample_spectra, shared_data_dir)
 from .spectra import band_average, gaussian_line
 
 BROAD_FWHM, NARROW_FWHM = (30.0, 150.0), (4.0, 16.0)      # nm
@@ -71,12 +71,7 @@ def piecewise_kind(shape, wavelengths, rng) -> np.ndarray:
     for index, size in enumerate(sizes):
         label[shape_mask(box, rng, size)] = index
     masks = (label[None] == np.arange(len(sizes))[:, None, None]) * rng.uniform(0.3, 1.0, (len(sizes), 1, 1))
-    return compose_in_window(shape, masks, spectra(rng, wavelengths, len(sizes)))
-
-
-def compose_in_window(shape, masks: np.ndarray, spectra_rk: np.ndarray) -> np.ndarray:
-    """v_k = Σ_r mask_r · s_r(k), masks (R, h, w) on the inner window, in a zero frame: (K, H, W)."""
-    return np.einsum("rhw,rk->khw", in_window(shape, masks), spectra_rk)
+    return compose(in_window(shape, masks), spectra(rng, wavelengths, len(sizes)))
 
 
 def photo(box, rng: np.random.Generator) -> np.ndarray:
@@ -104,7 +99,7 @@ def natural_kind(shape, wavelengths, rng) -> np.ndarray:
     distance2 = np.sum((rgb[None] - colours[:, None, None]) ** 2, axis=-1)
     abundance = np.exp(-(distance2 - distance2.min(axis=0)) / (2 * width ** 2))
     shading = rgb @ np.array([0.2126, 0.7152, 0.0722])
-    return compose_in_window(shape, abundance / abundance.sum(axis=0) * shading, spectra(rng, wavelengths, n))
+    return compose(in_window(shape, abundance / abundance.sum(axis=0) * shading), spectra(rng, wavelengths, n))
 
 
 def sparse_kind(shape, wavelengths, rng) -> np.ndarray:
@@ -112,17 +107,14 @@ def sparse_kind(shape, wavelengths, rng) -> np.ndarray:
     box = inner_shape(shape)
     n = int(rng.integers(5, 41))
     centres = np.stack([rng.integers(0, box[0], n), rng.integers(0, box[1], n)], axis=1)
-    radii = rng.choice([0.0, 1.0, 1.5, 2.0], n)
-    y, x = np.mgrid[0:box[0], 0:box[1]]
-    discs = ((y[None] - centres[:, 0, None, None]) ** 2 + (x[None] - centres[:, 1, None, None]) ** 2
-             <= radii[:, None, None] ** 2) * rng.uniform(0.3, 1.0, (n, 1, 1))
+    discs = disc_masks(box, centres, rng.choice([0.0, 1.0, 1.5, 2.0], n)) * rng.uniform(0.3, 1.0, (n, 1, 1))
     narrow = rng.random(n) < 0.5
     source_spectra = np.where(narrow[:, None], spectra(rng, wavelengths, n, NARROW_FWHM), spectra(rng, wavelengths, n))
     field = ndi.gaussian_filter(rng.random(box), sigma=max(box) / 8)
     field = (field - field.min()) / (np.ptp(field) or 1.0)
     background = rng.uniform(0.02, 0.1) * (0.5 + 0.5 * field)
-    return compose_in_window(shape, np.concatenate([discs, background[None]]),
-                             np.concatenate([source_spectra, spectra(rng, wavelengths, 1)]))
+    return compose(in_window(shape, np.concatenate([discs, background[None]])),
+                   np.concatenate([source_spectra, spectra(rng, wavelengths, 1)]))
 
 
 def lines_kind(shape, wavelengths, rng) -> np.ndarray:
@@ -132,12 +124,9 @@ def lines_kind(shape, wavelengths, rng) -> np.ndarray:
     ys = (np.arange(rows) + 0.5) * box[0] / rows + rng.uniform(-0.2, 0.2, rows) * box[0] / rows
     xs = (np.arange(cols) + 0.5) * box[1] / cols + rng.uniform(-0.2, 0.2, cols) * box[1] / cols
     centres = np.stack(np.meshgrid(ys, xs, indexing="ij"), -1).reshape(-1, 2)
-    radii = rng.uniform(1.0, 2.5, len(centres))
-    y, x = np.mgrid[0:box[0], 0:box[1]]
-    masks = ((y[None] - centres[:, 0, None, None]) ** 2 + (x[None] - centres[:, 1, None, None]) ** 2
-             <= radii[:, None, None] ** 2) * rng.uniform(0.3, 1.0, (len(centres), 1, 1))
+    masks = disc_masks(box, centres, rng.uniform(1.0, 2.5, len(centres))) * rng.uniform(0.3, 1.0, (len(centres), 1, 1))
     lines = spectra(rng, wavelengths, int(rng.integers(3, 9)), NARROW_FWHM)
-    return compose_in_window(shape, masks, lines[rng.integers(0, len(lines), len(centres))])
+    return compose(in_window(shape, masks), lines[rng.integers(0, len(lines), len(centres))])
 
 
 def real_cubes(data: Path) -> dict:
