@@ -15,7 +15,7 @@ scene point that can reach the sensor and no wrapped one can:
 Two fields:
 
 * the paper's (the full solver, ``--no-skip``): 2H × 2W, window centred, the whole PSF frame;
-* the support field (the "field" skip): the PSF's measured support (the box holding all but
+* the support field (``--support-field``, a speed option): the PSF's measured support (the box holding all but
   ``SUPPORT_TAIL`` of its L1 mass; the few tail values outside it are dropped), each side
   grown to a length the FFT engine transforms fast; scene area the PSF cannot bring onto the
   sensor is not part of the problem.

@@ -30,6 +30,7 @@ class SolverSettings:
     skip: bool = True              # skip what the scene doesn't need (False: the full solver)
     rank: int = 0                  # spectral basis vectors: R < K forces a subspace of R; 0 = as ``subspace`` says
     subspace: bool = False         # enter a spectral subspace of automatic size (faster; uncertified: see phases)
+    support_field: bool = False    # the PSF support's field instead of the paper's 2H × 2W (faster; uncertified: skips)
     dtype: str = "float32"
     objective_every: int = 10      # F(x) evaluated (and the best iterate kept) this often
     restart: bool = True           # adaptive momentum restart (O'Donoghue–Candès)

@@ -11,9 +11,11 @@ are turned back into data units here, at the edge. The user's weights are relati
 cube by s, and the same weights suit any PSF or filter normalisation.
 
 Skips (``skip=True``, the default; ``skip=False`` is the full solver: the paper's field, every
-band, every iteration in band space): the support-sized field, no FFTs for bands no filter
-sees, zero-weight terms never evaluated; the spectral subspace only when asked (``subspace=True`` or
-``rank``: it is faster but uncertified, see :mod:`clsdcam.phases`).
+band, every iteration in band space): no FFTs for bands no filter sees, pruned transforms on the host
+path, zero-weight terms never evaluated: all exact, so the default solves ``--no-skip``'s
+problem on its field. Two speed options change the problem and are taken only when asked: the spectral
+subspace (``subspace=True`` or ``rank``, see :mod:`clsdcam.phases`) and the support-sized field
+(``support_field=True``, see :mod:`clsdcam.skips`); docs/accuracy.md says why neither is the default.
 Each is reported in ``Result.attrs["skips"]`` with the FFT work it saved.
 """
 from __future__ import annotations
@@ -76,7 +78,8 @@ class Solver:
         self.backend = get_backend(backend, self.settings.dtype, device, fft, path) if isinstance(backend, str) \
             else backend
         self.calibration = calibration
-        self.geometry = plan_geometry(calibration.psf, self.backend, self.settings.skip)
+        support = self.settings.skip and self.settings.support_field
+        self.geometry = plan_geometry(calibration.psf, self.backend, support)
         self._check_memory()
         self.model = ForwardModel(self.backend, calibration.psf, calibration.filters, geometry=self.geometry,
                                   skip_unseen=self.settings.skip)

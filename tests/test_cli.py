@@ -83,7 +83,7 @@ def test_bad_input_exits_2_with_one_line_and_no_output(simulated, tmp_path, caps
 
 def test_skip_options_reach_the_solver_and_the_report_is_printed(tmp_path, capsys):
     """--no-skip is the full solver (paper field, every band); --rank forces the subspace; both say so; --subspace
-    reaches the settings (the default leaves it off)."""
+    and --support-field reach the settings (the default leaves both off)."""
     sim = tmp_path / "sim"
     assert main(["simulate", str(sim), "--size", "32x40", "--bands", "16", "--scene", "leds"]) == 0
     args = [str(sim / "measurement.npy"), "--calibration", str(sim / "calibration.h5"), "--quiet", "--iters", "20"]
@@ -96,10 +96,11 @@ def test_skip_options_reach_the_solver_and_the_report_is_printed(tmp_path, capsy
         assert tuple(full.attrs["field_shape"]) == (64, 80) and not full.attrs["skip"]
         assert set(full["history/rank"][:]) == {16} and set(fast["history/rank"][10:]) == {2}
         assert fast.attrs["rank"] == 2 and fast.attrs["plateau"] == 1e-12 and fast.attrs["fft_work_saved"] > 0
-        assert not fast.attrs["subspace"]
-    assert main(["reconstruct", *args, "-o", str(tmp_path / "auto.h5"), "--subspace"]) == 0
+        assert not fast.attrs["subspace"] and not fast.attrs["support_field"]
+        assert tuple(fast.attrs["field_shape"]) == (64, 80)
+    assert main(["reconstruct", *args, "-o", str(tmp_path / "auto.h5"), "--subspace", "--support-field"]) == 0
     with h5py.File(tmp_path / "auto.h5", "r") as chosen:
-        assert chosen.attrs["subspace"]
+        assert chosen.attrs["subspace"] and chosen.attrs["support_field"]
 
 
 def test_console_entry_point_reports_bad_input_without_traceback(tmp_path):

@@ -13,12 +13,14 @@ spectral angle ≤ ``--no-skip``'s + 0.5°. The weight's rule, at the last mark:
 weight's − 0.5 dB and its angle ≤ that run's + 1°, the fixed weights spanning a decade either side of the one
 the default chose (``--sweep`` points, log-spaced). Per kind the table gives the worst and the median margin
 (positive: the rule holds by that much). Writes ``panel.json`` after every scene, ``panel.md`` and ``panel.png``
-(both rules' margins, every scene, one colour a kind). Without real cubes in ``../shared/data`` the ``real`` kind is
-left out (said on stderr).
+(both rules' margins, every scene, one colour a kind). ``--also support-field`` (or ``subspace``) judges that
+speed option by the same rule on every scene; ``--only I`` replays scene I of a panel alone. Without real cubes
+in ``../shared/data`` the ``real`` kind is left out (said on stderr).
 """
 from __future__ import annotations
 
 import sys
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +32,7 @@ from clsdcam.sim.kinds import KINDS, make_kind, real_cubes
 
 LEVELS = {"standard": {"noise_var": 1e-5, "photons": 2e4}, "low light": {"noise_var": 1e-4, "photons": 2e3}}
 SWEEP_PSNR_DB, SWEEP_ANGLE_DEG = 0.5, 1.0
+ALSO = {"support-field": {"support_field": True}, "subspace": {"subspace": True}}   # speed options --also judges
 
 
 def scene_plan(count: int, seed: int, kinds=tuple(KINDS)) -> list[dict]:
@@ -45,13 +48,17 @@ def sweep_weights(chosen: float, points: int) -> list[float]:
     return [float(chosen * 10.0 ** e) for e in np.linspace(-1.0, 1.0, points)]
 
 
-def run_scene(plan: dict, shape, bands: int, marks, points: int) -> dict:
-    wavelengths = band_wavelengths(bands)
-    cube = make_kind(plan["kind"], shape, wavelengths, plan["seed"])
-    sim = simulate(scene=f"kind:{plan['kind']}", shape=shape, n_bands=bands, seed=plan["seed"] % 2 ** 31, cube=cube,
-                   **LEVELS[plan["level"]])
+def panel_scene(plan: dict, shape, bands: int):
+    """The simulation of one planned scene: its kind's cube, the simulator's camera and noise, all from its seed."""
+    cube = make_kind(plan["kind"], shape, band_wavelengths(bands), plan["seed"])
+    return simulate(scene=f"kind:{plan['kind']}", shape=shape, n_bands=bands, seed=plan["seed"] % 2 ** 31, cube=cube,
+                    **LEVELS[plan["level"]])
+
+
+def run_scene(plan: dict, shape, bands: int, marks, points: int, also=()) -> dict:
+    sim = panel_scene(plan, shape, bands)
     runs = {}
-    for name, fields in {"default": {}, "--no-skip": {"skip": False}}.items():
+    for name, fields in {"default": {}, "--no-skip": {"skip": False}, **{f"--{a}": ALSO[a] for a in also}}.items():
         runs[name] = run(sim, fields, marks)
     for tau in sweep_weights(runs["default"]["tv_chosen"], points) if points else ():
         runs[f"--tv {tau:.3g}"] = run(sim, {"tv": tau}, marks[-1:])
@@ -63,9 +70,9 @@ def run(sim, fields: dict, marks) -> dict:
     return {"points": scene_points("", sim, snapshots), **attrs}
 
 
-def rule_margins(scene: dict) -> tuple[float, float]:
-    """(PSNR margin dB, angle margin °) of the default against --no-skip: the smallest over the marks."""
-    pairs = list(zip(scene["runs"]["default"]["points"], scene["runs"]["--no-skip"]["points"]))
+def rule_margins(scene: dict, name: str = "default") -> tuple[float, float]:
+    """(PSNR margin dB, angle margin °) of run ``name`` (the default) against --no-skip: the smallest over the marks."""
+    pairs = list(zip(scene["runs"][name]["points"], scene["runs"]["--no-skip"]["points"]))
     return (min(d["psnr"] - f["psnr"] + PSNR_MARGIN_DB for d, f in pairs),
             min(f["angle"] - d["angle"] + ANGLE_MARGIN_DEG for d, f in pairs))
 
@@ -109,8 +116,8 @@ def kind_rows(results: dict, margins, label: str) -> list[str]:
 def scene_rows(results: dict) -> list[str]:
     rows = ["| # | kind | noise | seed | τ chosen | default, last mark | --no-skip | best fixed τ: PSNR / SA | "
             "rank |", "|---:|---|---|---|---:|---|---|---|---:|"]
-    for i, s in enumerate(results["scenes"]):
-        d, f = (s["runs"][n] for n in ("default", "--no-skip"))
+    for s in results["scenes"]:
+        i, (d, f) = s["index"], (s["runs"][n] for n in ("default", "--no-skip"))
         best = best_fixed(s)
         rows.append(f"| {i} | {s['kind']} | {s['level']} | {s['seed']} | {d['tv_chosen']:.3g} | {point(d)} | "
                     f"{point(f)} | " + (f"{best[0][5:]}: {point(best[1])}" if best else "–") +
@@ -127,6 +134,9 @@ def markdown(results: dict) -> str:
     lines = [f"Seed {results['seed']}, {results['size']}×{results['bands']}, marks {results['marks']}.", "",
              "The default against `--no-skip` at every mark (margins ≥ 0 pass: PSNR ≥ full − 0.2 dB, "
              "SA ≤ full + 0.5°):", ""] + kind_rows(results, rule_margins, "rule")
+    for name in results.get("also", ()):
+        lines += ["", f"`--{name}` against `--no-skip`, the same rule:", ""] + \
+            kind_rows(results, partial(rule_margins, name=f"--{name}"), "rule")
     if any(sweep_margins(s) for s in results["scenes"]):
         lines += ["", "The chosen weight against the sweep's best fixed weight at the last mark (margins ≥ 0 pass: "
                   "PSNR ≥ best − 0.5 dB, SA ≤ its + 1°):", ""] + kind_rows(results, sweep_margins, "weight")
@@ -164,6 +174,9 @@ def main(argv=None) -> int:
     parser.add_argument("--marks", default="50,100,300")
     parser.add_argument("--sweep", type=int, default=5, help="fixed weights a decade either side (0: no sweep)")
     parser.add_argument("--seed", type=int, default=None, help="replay a panel (default: fresh entropy)")
+    parser.add_argument("--only", type=int, default=None, metavar="I", help="replay scene I of the panel alone")
+    parser.add_argument("--also", action="append", choices=list(ALSO), default=[],
+                        help="also judge this speed option by the rule, on every scene (repeatable)")
     args = parser.parse_args(argv)
     kinds = [kind for kind in KINDS if kind != "real" or real_cubes(shared_data_dir())]
     if "real" in KINDS and "real" not in kinds:
@@ -172,10 +185,13 @@ def main(argv=None) -> int:
     marks = sorted(int(m) for m in args.marks.split(","))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "marks": marks, "scenes": []}
+    results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "marks": marks, "also": args.also,
+               "scenes": []}
     print(f"panel seed {seed}", file=sys.stderr, flush=True)
     for i, plan in enumerate(scene_plan(args.scenes, seed, kinds)):
-        results["scenes"].append(run_scene(plan, args.size, args.bands, marks, args.sweep))
+        if args.only is not None and i != args.only:
+            continue
+        results["scenes"].append({"index": i, **run_scene(plan, args.size, args.bands, marks, args.sweep, args.also)})
         print(f"  scene {i + 1}/{args.scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
         save_json(out, "panel", results)
     report(out, "panel", results, markdown(results))

@@ -44,12 +44,13 @@ from clsdcam.solver import Settings, Solver  # noqa: E402
 CONFIGS = {  # name -> (backend, Settings fields)
     "numpy": ("numpy", {}),
     "numpy --no-skip": ("numpy", {"skip": False}),
-    "numpy --subspace": ("numpy", {"subspace": True}),
+    "numpy --support-field": ("numpy", {"support_field": True}),
+    "numpy --subspace --support-field": ("numpy", {"subspace": True, "support_field": True}),
     "opencl": ("opencl", {}),
     "opencl --no-skip": ("opencl", {"skip": False}),
     "numpy float64": ("numpy", {"dtype": "float64"}),
 }
-RANKED = "numpy --rank "     # + N: the default at a fixed basis size (what an oracle rank would give)
+RANKED = "numpy --rank "     # + N: a fixed basis size (what an oracle rank would give), on the support field
 AUTHORS = "authors"
 FULL, DEFAULT = "numpy --no-skip", "numpy"
 SKIP_MARGIN_DB = 0.2
@@ -58,7 +59,7 @@ SKIP_MARGIN_DB = 0.2
 def config(name: str) -> tuple[str, dict]:
     """(backend, Settings fields) of a configuration name: one of CONFIGS, or ``numpy --rank N``."""
     if name.startswith(RANKED) and name[len(RANKED):].isdigit():
-        return "numpy", {"rank": int(name[len(RANKED):])}
+        return "numpy", {"rank": int(name[len(RANKED):]), "support_field": True}
     if name not in CONFIGS:
         raise ValueError(f"unknown configuration {name!r} (from: {', '.join(CONFIGS)}, {RANKED}N)")
     return CONFIGS[name]

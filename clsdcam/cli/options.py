@@ -136,6 +136,10 @@ def add_solver_options(p: argparse.ArgumentParser):
                    help="enter a spectral subspace of automatic size once the spectra settle: faster, but it can "
                         "cost spectral angle on scenes with many smooth, overlapping spectra (default: band space; "
                         "ignored with --no-skip)")
+    p.add_argument("--support-field", action="store_true",
+                   help="solve on the field the PSF's support needs instead of the paper's 2H×2W: faster (~20%% at "
+                        "full size), but the solve then differs from --no-skip's (0.2 dB at 500 iterations on a real "
+                        "cube; default: the paper's field; ignored with --no-skip)")
     p.add_argument("--no-skip", action="store_true",
                    help="the full solver: the paper's 2H×2W field, every band, no spectral subspace")
     add_backend_options(p)
@@ -216,7 +220,7 @@ def settings_from(args):
     from ..settings import Settings
 
     return Settings(iters=args.iters, tv_weights=args.tv_weights, tol=args.tol, plateau=args.plateau, rank=args.rank,
-                    subspace=args.subspace, skip=not args.no_skip, dtype=args.dtype,
+                    subspace=args.subspace, support_field=args.support_field, skip=not args.no_skip, dtype=args.dtype,
                     full_field=getattr(args, "full_field", False),
                     **{row.name: getattr(args, row.name) for row in PRIORS})
 

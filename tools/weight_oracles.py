@@ -1,0 +1,113 @@
+#!/usr/bin/env python3
+"""What a data-driven weight rule could see: the sweep of fixed TV weights on panel scenes, scored by the truth
+(PSNR, spectral angle) and by the two oracle risks that principled rules estimate.
+
+    python tools/weight_oracles.py --seed 3717452930663257581 --only 5,6,8,9,19 --size 128x160 --out oracles
+
+For each fixed weight τ (``--sweep`` points a decade either side of the one ``--tv auto`` chose), after
+``--iters`` iterations of the default solver, with e = v̂ − v the error over the whole field:
+
+* predicted risk ‖A·e‖² / ‖A·v‖²: what the discrepancy principle, SURE on the measurement and GCV estimate from
+  the data alone;
+* projected risk ‖P·e‖² / ‖P·v‖², P = Aᵀ(AAᵀ)⁻¹A the projection onto A's row space (``--cg`` conjugate-gradient
+  steps on AAᵀ): what projected SURE estimates (Vonesch, Ramani and Unser 2008; Eldar 2009).
+
+A rule is at best as good as the oracle it estimates: where an oracle's best weight is not the truth's best (by
+PSNR), no estimate of that oracle picks the truth's best either. The scenes are the panel's
+(``tools/bench_panel.py``: the same seed and index give the same scene). Writes ``oracles.json`` and prints one
+table per scene, each score's best weight starred.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from bench_accuracy import panel_parser, save_json
+from bench_panel import panel_scene, scene_plan, sweep_weights
+from clsdcam.backends.numpy import NumpyBackend
+from clsdcam.metrics import psnr, spectral_angle
+from clsdcam.model import ForwardModel
+from clsdcam.solver import Settings, Solver
+
+SCORES = {"psnr": max, "angle": min, "predicted": min, "projected": min}   # each score's best
+
+
+def solve(sim, tv, iters: int):
+    """The default solver's result at a fixed weight (``tv`` may be "auto"), with its whole field."""
+    return Solver(sim.calibration, settings=Settings(iters=iters, tv=tv, full_field=True)).solve(sim.measurement)
+
+
+def risks(model: ForwardModel, error: np.ndarray, truth: np.ndarray, cg_steps: int) -> dict:
+    """Predicted and projected risk of a field ``error`` relative to the same of the field ``truth``."""
+    (e, v) = (model.forward(x) for x in (error, truth))
+    return {"predicted": float(np.vdot(e, e) / np.vdot(v, v)),
+            "projected": float(np.vdot(e, normal_solve(model, e, cg_steps)) / np.vdot(v, normal_solve(model, v, cg_steps)))}
+
+
+def normal_solve(model: ForwardModel, y: np.ndarray, steps: int) -> np.ndarray:
+    """z ≈ (AAᵀ)⁻¹y by conjugate gradients from 0 (yᵀz grows monotonically to yᵀ(AAᵀ)⁻¹y)."""
+    z, r = np.zeros_like(y), y.copy()
+    p, rr = r.copy(), float(np.vdot(r, r))
+    for _ in range(steps):
+        ap = model.forward(model.adjoint(p))
+        alpha = rr / float(np.vdot(p, ap))
+        z += alpha * p
+        r -= alpha * ap
+        rr, previous = float(np.vdot(r, r)), rr
+        p = r + (rr / previous) * p
+    return z
+
+
+def scene_sweep(sim, points: int, iters: int, cg_steps: int) -> dict:
+    """The automatic weight, then every fixed weight's truth scores and oracle risks."""
+    auto = solve(sim, "auto", iters)
+    model = ForwardModel(NumpyBackend("float64"), sim.calibration.psf, sim.calibration.filters)
+    truth = model.embed(sim.truth)
+    rows = []
+    for tau in sweep_weights(auto.attrs["tv_chosen"], points):
+        result = solve(sim, tau, iters)
+        rows.append({"tv": tau, "psnr": psnr(result.cube, sim.truth), "angle": spectral_angle(result.cube, sim.truth),
+                     **risks(model, result.full_field.astype(np.float64) - truth, truth, cg_steps)})
+    return {"tv_chosen": auto.attrs["tv_chosen"], "rows": rows}
+
+
+def table(scene: dict) -> str:
+    rows = scene["rows"]
+    best = {key: pick(range(len(rows)), key=lambda i: rows[i][key]) for key, pick in SCORES.items()}
+    lines = [f"scene {scene['index']} ({scene['kind']}, {scene['level']}), --tv auto chose {scene['tv_chosen']:.3g}:",
+             "| τ | PSNR dB | SA ° | predicted risk | projected risk |", "|---:|---:|---:|---:|---:|"]
+    for i, row in enumerate(rows):
+        cells = [f"{row[key]:.2f}" if key in ("psnr", "angle") else f"{row[key]:.3e}" for key in SCORES]
+        lines.append(f"| {row['tv']:.3g} | " + " | ".join(c + ("*" if best[key] == i else "")
+                                                        for c, key in zip(cells, SCORES)) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = panel_parser(__doc__.splitlines()[0], "oracles", named_scenes=False)
+    parser.set_defaults(size=(128, 160))
+    parser.add_argument("--seed", type=int, required=True, help="the panel's seed")
+    parser.add_argument("--only", required=True, help="the panel's scene indices, e.g. 5,6,9")
+    parser.add_argument("--iters", type=int, default=300)
+    parser.add_argument("--sweep", type=int, default=5, help="fixed weights a decade either side")
+    parser.add_argument("--cg", type=int, default=100, help="conjugate-gradient steps per projection")
+    args = parser.parse_args(argv)
+    indices = [int(i) for i in args.only.split(",")]
+    plans = scene_plan(max(indices) + 1, args.seed)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    results = {"seed": args.seed, "iters": args.iters, "cg": args.cg, "scenes": []}
+    for index in indices:
+        plan = plans[index]
+        scene = {"index": index, **plan, **scene_sweep(panel_scene(plan, args.size, args.bands), args.sweep,
+                                                         args.iters, args.cg)}
+        results["scenes"].append(scene)
+        save_json(out, "oracles", results)
+        print(table(scene) + "\n", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
