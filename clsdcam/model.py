@@ -5,7 +5,7 @@
 
 The scene field and the window in it are a :class:`~clsdcam.geometry.FieldGeometry`: the
 paper's 2H × 2W with the whole PSF frame by default, or the support-sized field of the
-"field" skip. The convolution is circular on the field, which equals the linear one on the
+``--support-field`` option. The convolution is circular on the field, which equals the linear one on the
 sensor window (see geometry.py). The filtered convolution is built here from the backend's
 primitives (:mod:`clsdcam.convolution`: chunked host FFTs on the host path, whole-cube primitives on
 the device path, one operator). Knows nothing of the device.

@@ -4,7 +4,7 @@
   sensor is not part of the problem (support-sized field, :func:`clsdcam.geometry.support_geometry`). The
   solve is not the paper's field's: the paper's field keeps a margin of unknowns the data never touch, which
   the TV prox moves only slowly from zero, and it shapes how the scene just outside the window is estimated
-  (0.2 dB at 500 iterations on a real cube at full size; a 16-pixel margin 0.03 dB);
+  (0.2 dB at 500 iterations on a real cube at full size, docs/accuracy.md);
 * bands: a band no pixel's filter sees adds nothing to b and gets no gradient: no FFTs for it;
 * subspace (``--subspace`` or ``--rank``; off by default, docs/accuracy.md): when the scene's spectra span few
   dimensions, r spectral basis vectors instead of K bands (:mod:`clsdcam.subspace`): 4r FFTs per iteration

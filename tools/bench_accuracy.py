@@ -144,7 +144,7 @@ def verdict(runs: dict) -> str:
 def sweep_table(results: dict) -> list[str]:
     """Per scene, at the last mark: the default's (automatic) weight against the best fixed ``--tv`` of the
     sweep, and whether it is within SWEEP_MARGIN_DB of it in PSNR."""
-    lines = ["", f"`--tv auto` against the sweep's best fixed weight, PSNR at the last mark:", "",
+    lines = ["", "`--tv auto` against the sweep's best fixed weight, PSNR at the last mark:", "",
              "| scene | auto τ | auto PSNR | best fixed τ | its PSNR | auto − best | within "
              f"{SWEEP_MARGIN_DB} dB |", "|---|---:|---:|---:|---:|---:|---|"]
     for scene, runs in results["scenes"].items():

@@ -43,6 +43,14 @@ def scene_plan(count: int, seed: int, kinds=tuple(KINDS)) -> list[dict]:
             for i, s in enumerate(seeds)]
 
 
+def panel_kinds() -> list[str]:
+    """The kinds a panel draws in turn: every kind, less ``real`` when no real cube is at hand (said on stderr)."""
+    kinds = [kind for kind in KINDS if kind != "real" or real_cubes(shared_data_dir())]
+    if "real" in KINDS and "real" not in kinds:
+        print("kind 'real' left out: no real cube in ../shared/data (or $CLSDCAM_DATA)", file=sys.stderr)
+    return kinds
+
+
 def sweep_weights(chosen: float, points: int) -> list[float]:
     """``points`` fixed weights log-spaced over a decade either side of ``chosen``."""
     return [float(chosen * 10.0 ** e) for e in np.linspace(-1.0, 1.0, points)]
@@ -178,9 +186,9 @@ def main(argv=None) -> int:
     parser.add_argument("--also", action="append", choices=list(ALSO), default=[],
                         help="also judge this speed option by the rule, on every scene (repeatable)")
     args = parser.parse_args(argv)
-    kinds = [kind for kind in KINDS if kind != "real" or real_cubes(shared_data_dir())]
-    if "real" in KINDS and "real" not in kinds:
-        print("kind 'real' left out: no real cube in ../shared/data (or $CLSDCAM_DATA)", file=sys.stderr)
+    if args.only is not None and not 0 <= args.only < args.scenes:
+        parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
+    kinds = panel_kinds()
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
     marks = sorted(int(m) for m in args.marks.split(","))
     out = Path(args.out)

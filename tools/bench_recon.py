@@ -50,7 +50,7 @@ CONFIGS = {  # name -> (backend, Settings fields)
     "opencl --no-skip": ("opencl", {"skip": False}),
     "numpy float64": ("numpy", {"dtype": "float64"}),
 }
-RANKED = "numpy --rank "     # + N: a fixed basis size (what an oracle rank would give), on the support field
+RANKED = "numpy --rank "     # + N: the default at a fixed basis size (what an oracle rank would give)
 AUTHORS = "authors"
 FULL, DEFAULT = "numpy --no-skip", "numpy"
 SKIP_MARGIN_DB = 0.2
@@ -59,7 +59,7 @@ SKIP_MARGIN_DB = 0.2
 def config(name: str) -> tuple[str, dict]:
     """(backend, Settings fields) of a configuration name: one of CONFIGS, or ``numpy --rank N``."""
     if name.startswith(RANKED) and name[len(RANKED):].isdigit():
-        return "numpy", {"rank": int(name[len(RANKED):]), "support_field": True}
+        return "numpy", {"rank": int(name[len(RANKED):])}
     if name not in CONFIGS:
         raise ValueError(f"unknown configuration {name!r} (from: {', '.join(CONFIGS)}, {RANKED}N)")
     return CONFIGS[name]

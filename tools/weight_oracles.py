@@ -2,7 +2,7 @@
 """What a data-driven weight rule could see: the sweep of fixed TV weights on panel scenes, scored by the truth
 (PSNR, spectral angle) and by the two oracle risks that principled rules estimate.
 
-    python tools/weight_oracles.py --seed 3717452930663257581 --only 5,6,8,9,19 --size 128x160 --out oracles
+    python tools/weight_oracles.py --seed 3717452930663257581 --only 5,6,7,8,9 --size 128x160 --out oracles
 
 For each fixed weight τ (``--sweep`` points a decade either side of the one ``--tv auto`` chose), after
 ``--iters`` iterations of the default solver, with e = v̂ − v the error over the whole field:
@@ -12,8 +12,9 @@ For each fixed weight τ (``--sweep`` points a decade either side of the one ``-
 * projected risk ‖P·e‖² / ‖P·v‖², P = Aᵀ(AAᵀ)⁻¹A the projection onto A's row space (``--cg`` conjugate-gradient
   steps on AAᵀ): what projected SURE estimates (Vonesch, Ramani and Unser 2008; Eldar 2009).
 
-A rule is at best as good as the oracle it estimates: where an oracle's best weight is not the truth's best (by
-PSNR), no estimate of that oracle picks the truth's best either. The scenes are the panel's
+The risks are computed with the truth known (for the projected one a lower bound when the conjugate gradients
+stop before ``CG_TOL``). A rule is at best as good as the oracle it estimates: where an oracle's best weight is
+not the truth's best (by PSNR), no estimate of that oracle picks the truth's best either. The scenes are the panel's
 (``tools/bench_panel.py``: the same seed and index give the same scene). Writes ``oracles.json`` and prints one
 table per scene, each score's best weight starred.
 """
@@ -25,12 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from bench_accuracy import panel_parser, save_json
-from bench_panel import panel_scene, scene_plan, sweep_weights
+from bench_panel import panel_kinds, panel_scene, scene_plan, sweep_weights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.model import ForwardModel
 from clsdcam.solver import Settings, Solver
 
+CG_TOL = 1e-8        # relative residual at which the conjugate gradients stop early
 SCORES = {"psnr": max, "angle": min, "predicted": min, "projected": min}   # each score's best
 
 
@@ -46,11 +48,15 @@ def risks(model: ForwardModel, error: np.ndarray, truth: np.ndarray, cg_steps: i
             "projected": float(np.vdot(e, normal_solve(model, e, cg_steps)) / np.vdot(v, normal_solve(model, v, cg_steps)))}
 
 
-def normal_solve(model: ForwardModel, y: np.ndarray, steps: int) -> np.ndarray:
-    """z ≈ (AAᵀ)⁻¹y by conjugate gradients from 0 (yᵀz grows monotonically to yᵀ(AAᵀ)⁻¹y)."""
+def normal_solve(model: ForwardModel, y: np.ndarray, steps: int, tol: float = CG_TOL) -> np.ndarray:
+    """z ≈ (AAᵀ)⁻¹y by at most ``steps`` conjugate-gradient steps from 0, fewer once ‖r‖ ≤ tol·‖y‖ (yᵀz grows
+    monotonically to yᵀ(AAᵀ)⁻¹y: a truncated solve gives a lower bound)."""
     z, r = np.zeros_like(y), y.copy()
     p, rr = r.copy(), float(np.vdot(r, r))
+    stop = tol ** 2 * rr
     for _ in range(steps):
+        if rr <= stop:
+            break
         ap = model.forward(model.adjoint(p))
         alpha = rr / float(np.vdot(p, ap))
         z += alpha * p
@@ -95,7 +101,7 @@ def main(argv=None) -> int:
     parser.add_argument("--cg", type=int, default=100, help="conjugate-gradient steps per projection")
     args = parser.parse_args(argv)
     indices = [int(i) for i in args.only.split(",")]
-    plans = scene_plan(max(indices) + 1, args.seed)
+    plans = scene_plan(max(indices) + 1, args.seed, panel_kinds())
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {"seed": args.seed, "iters": args.iters, "cg": args.cg, "scenes": []}

@@ -170,7 +170,7 @@ def memory_limits(device) -> tuple[int, int]:
     return device.global_mem_size, device.max_mem_alloc_size
 
 
-ADVICE = "use fewer bands, a smaller crop or field, or another --device (clsdcam devices lists them)"
+ADVICE = "use fewer bands, a smaller crop, --support-field, or another --device (clsdcam devices lists them)"
 
 
 def shortfall(device, needed: int, largest: int = 0) -> str | None:

@@ -14,8 +14,9 @@ Engines (``make_fft(queue, path, engine)``; which path runs which engine is the 
   X_a = (Z[κ] + conj Z[−κ])/2, X_b = (Z[κ] − conj Z[−κ])/(2i) (``pack=False``: one band each).
 * ``vkfft``  pyvkfft's native R2C/C2R, when pyvkfft is installed, for 7-smooth planes; a plane with a
   prime factor above 7 goes to reikna (VkFFT builds those with Rader's algorithm, and on Intel's CPU
-  runtime about one such plan in three transforms wrong: ``docs/portability.md``). The solver's fields
-  are 7-smooth (``fast_length``) except ``--no-skip``'s 2H × 2W when H or W has a prime factor above 7.
+  runtime about one such plan in three transforms wrong: ``docs/portability.md``). The support field
+  (``--support-field``) is 7-smooth (``fast_length``); the paper's 2H × 2W (the default's and ``--no-skip``'s)
+  is not when H or W has a prime factor above 7, and is a power of two for reikna only when H and W are.
 
 Plans are built on first use for a shape and kept in bounded caches (the few most recent).
 Each engine says which lengths it transforms fast (``fast_length``): 5-smooth for pocketfft's
