@@ -47,7 +47,7 @@ def configurations(bands: int, ranks, backends) -> dict:
     for backend in backends:
         configs[f"{backend} full solver (--no-skip)"] = (backend, {"skip": False}, 1)
         configs[f"{backend} default (paper field, {bands} bands)"] = (backend, {}, 1)
-        configs[f"{backend} --support-field ({bands} bands)"] = (backend, {"support_field": True}, 1)
+        configs[f"{backend} --support-field ({bands} bands)"] = (backend, SPEED, 1)
         configs[f"{backend} --subspace --support-field (automatic rank)"] = (backend, SPEED | {"subspace": True},
                                                                              WARMUP + 1)
         for rank in ranks:

@@ -30,6 +30,7 @@ from bench_panel import panel_kinds, panel_scene, scene_plan, sweep_weights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.model import ForwardModel
+from clsdcam.phases import AUTO_AT
 from clsdcam.solver import Settings, Solver
 
 CG_TOL = 1e-8        # relative residual at which the conjugate gradients stop early
@@ -41,11 +42,10 @@ def solve(sim, tv, iters: int):
     return Solver(sim.calibration, settings=Settings(iters=iters, tv=tv, full_field=True)).solve(sim.measurement)
 
 
-def risks(model: ForwardModel, error: np.ndarray, truth: np.ndarray, cg_steps: int) -> dict:
-    """Predicted and projected risk of a field ``error`` relative to the same of the field ``truth``."""
-    (e, v) = (model.forward(x) for x in (error, truth))
-    return {"predicted": float(np.vdot(e, e) / np.vdot(v, v)),
-            "projected": float(np.vdot(e, normal_solve(model, e, cg_steps)) / np.vdot(v, normal_solve(model, v, cg_steps)))}
+def risks(model: ForwardModel, field: np.ndarray, cg_steps: int) -> dict:
+    """‖A·x‖² and ‖P·x‖² = (Ax)ᵀ(AAᵀ)⁻¹(Ax) of a field x (an error, or the truth they are relative to)."""
+    y = model.forward(field)
+    return {"predicted": float(np.vdot(y, y)), "projected": float(np.vdot(y, normal_solve(model, y, cg_steps)))}
 
 
 def normal_solve(model: ForwardModel, y: np.ndarray, steps: int, tol: float = CG_TOL) -> np.ndarray:
@@ -67,15 +67,18 @@ def normal_solve(model: ForwardModel, y: np.ndarray, steps: int, tol: float = CG
 
 
 def scene_sweep(sim, points: int, iters: int, cg_steps: int) -> dict:
-    """The automatic weight, then every fixed weight's truth scores and oracle risks."""
-    auto = solve(sim, "auto", iters)
+    """The automatic weight (chosen by iteration AUTO_AT, so the solve stops there), then every fixed weight's truth
+    scores and oracle risks, each relative to the truth's own."""
+    auto = solve(sim, "auto", min(iters, AUTO_AT + 1))
     model = ForwardModel(NumpyBackend("float64"), sim.calibration.psf, sim.calibration.filters)
     truth = model.embed(sim.truth)
+    reference = risks(model, truth, cg_steps)
     rows = []
     for tau in sweep_weights(auto.attrs["tv_chosen"], points):
         result = solve(sim, tau, iters)
+        error = risks(model, result.full_field.astype(np.float64) - truth, cg_steps)
         rows.append({"tv": tau, "psnr": psnr(result.cube, sim.truth), "angle": spectral_angle(result.cube, sim.truth),
-                     **risks(model, result.full_field.astype(np.float64) - truth, truth, cg_steps)})
+                     **{key: error[key] / reference[key] for key in reference}})
     return {"tv_chosen": auto.attrs["tv_chosen"], "rows": rows}
 
 
