@@ -53,8 +53,10 @@ class Prior:
     reference: ClassVar[str]        # what a relative weight of 1 means (see the module docstring)
     auto_weight: ClassVar[AutoWeight | None] = None     # how ``auto`` chooses the weight (None: no auto)
     # subspace_prox(c, basis, step, out): out = Bᵀ·max(0, prox(B·c)) for coefficients c of basis B, fused;
-    # None when the prior has none (the subspace then expands, applies prox_nonneg and projects)
+    # None when the prior has none (the subspace then expands, applies prox_nonneg and projects); it runs on the
+    # backend's optional fusion named ``fusion`` (a backend without it gets the unfused path)
     subspace_prox: ClassVar[Callable | None] = None
+    fusion: ClassVar[str] = ""
 
     def __init__(self, backend, weight: float, settings):
         self.backend = backend
@@ -94,6 +96,7 @@ class TotalVariation(Prior):
     name = "tv"
     reference = "atb_max"
     auto_weight = AutoWeight(start=3e-4, per_noise=0.06, lowest=3e-5, highest=3e-3)
+    fusion = "subspace_tv"
 
     def __init__(self, backend, weight: float, settings):
         super().__init__(backend, weight, settings)
@@ -271,5 +274,8 @@ class ProxAverage:
         return float(sum(prior.value(x) for prior in self.priors))
 
     def fused_subspace(self) -> Callable | None:
-        """The one prior's fused subspace prox ``(c, basis, step, out)``, or None (several priors or none)."""
-        return self.priors[0].subspace_prox if len(self.priors) == 1 else None
+        """The one prior's fused subspace prox ``(c, basis, step, out)``, or None (several priors or none, or a
+        backend without the fusion it runs on)."""
+        if len(self.priors) != 1 or not hasattr(self.backend, self.priors[0].fusion or "-"):
+            return None
+        return self.priors[0].subspace_prox

@@ -1,9 +1,10 @@
-"""One measurement's problem in one space: FISTA's gradient step, prox and objective.
+"""One measurement's problem in one space: the gradient step, prox and objective an algorithm uses
+(:mod:`clsdcam.algorithms.base`).
 
     F(x) = ½‖A_s x − b‖² + g(E x)
 
 where x is the band cube (E = I, A_s = A) or a spectral subspace's coefficients
-(E = B, A_s = A·B, see :mod:`clsdcam.subspace`). The solver moves FISTA between spaces;
+(E = B, A_s = A·B, see :mod:`clsdcam.subspace`). The phases move the iterates between spaces;
 each space knows how to turn its iterate back into a band cube (:meth:`Problem.to_field`).
 """
 from __future__ import annotations
@@ -19,7 +20,7 @@ class Problem:
         self.model = model
         self.backend = model.backend
         self.b = b
-        self.prox_into = prox
+        self.prox = prox                 # prox(z, step, out): out = max(0, prox_{step·g}(E·z)) in the space's terms
         self.penalty = penalty
         self.rank = rank
         self.subspace = subspace
@@ -31,9 +32,6 @@ class Problem:
         data = 0.5 * self.backend.vdot(self.residual_buffer, self.residual_buffer)
         self.model.adjoint(self.residual_buffer, out=out, y=y, step=step)
         return data
-
-    def prox(self, z, out, step: float):
-        return self.prox_into(z, step, out)
 
     def residual(self, x):
         """r = A_s x − b (in the problem's buffer)."""

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, make_dataclass
 
 import numpy as np
 
+from .algorithms import ALGORITHMS
 from .errors import InputError
 from .priors import AUTO, PRIORS
 
@@ -24,6 +25,7 @@ class SolverSettings:
     """The fields that are not prior weights."""
 
     iters: int = DEFAULT_ITERS
+    algorithm: str = "fista"       # a name of clsdcam.algorithms.ALGORITHMS
     tv_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)  # x, y, λ
     tol: float = DEFAULT_TOL
     plateau: float = 0.0           # stop when F fell by less than this (relative) between checkpoints
@@ -40,6 +42,8 @@ class SolverSettings:
     def __post_init__(self):
         object.__setattr__(self, "tv_weights", tuple(float(w) for w in self.tv_weights))
         _require(_is_int(self.iters) and self.iters >= 1, f"--iters {self.iters}: must be an integer ≥ 1")
+        _require(self.algorithm in ALGORITHMS,
+                 f"--algorithm {self.algorithm!r}: expected one of {', '.join(ALGORITHMS)}")
         _require(_finite_nonneg(self.step_scale) and self.step_scale > 0, f"step_scale {self.step_scale}: must be > 0")
         _require(_is_int(self.rank) and self.rank >= 0, f"--rank {self.rank}: must be an integer ≥ 0")
         for name in ("tol", "plateau"):

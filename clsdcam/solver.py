@@ -1,11 +1,13 @@
 """Reconstruction: one measurement + a calibration -> a hyperspectral cube.
 
-    argmin_{v ≥ 0} ½‖b − Av‖² + Σ_i τ_i·φ_i(v)     by FISTA with step 1/L
+    argmin_{v ≥ 0} ½‖b − Av‖² + Σ_i τ_i·φ_i(v)     by an algorithm of :mod:`clsdcam.algorithms` (FISTA), step 1/L
 
-with the priors φ_i of :mod:`clsdcam.priors` (TV by default).
+with the priors φ_i of :mod:`clsdcam.priors` (TV by default). The solver builds the model once per calibration;
+each solve builds its start (:mod:`clsdcam.state`), priors, spaces (:mod:`clsdcam.spaces`) and algorithm, and
+hands them to the phases (:mod:`clsdcam.phases`), which run the driver (:mod:`clsdcam.driver`).
 
 Units. The measurement is used as given. Internally it is divided by s = max|b| (the solver's
-units: FISTA's records, objective and checkpoints are all in them); the result's cube and history
+units: the driver's records, objective and checkpoints are all in them); the result's cube and history
 are turned back into data units here, at the edge. The user's weights are relative to the data
 (each prior's reference, see :mod:`clsdcam.priors`), so scaling the measurement by s scales the
 cube by s, and the same weights suit any PSF or filter normalisation.
@@ -14,7 +16,7 @@ Skips (``skip=True``, the default; ``skip=False`` is the full solver: the paper'
 band, every iteration in band space): no FFTs for bands no filter sees, pruned transforms on the host
 path, zero-weight terms never evaluated: all exact, so the default solves ``--no-skip``'s
 problem on its field. Two speed options change the problem and are taken only when asked: the spectral
-subspace (``subspace=True`` or ``rank``, see :mod:`clsdcam.phases`) and the support-sized field
+subspace (``subspace=True`` or ``rank``, see :mod:`clsdcam.space_policy`) and the support-sized field
 (``support_field=True``, see :mod:`clsdcam.skips`); docs/accuracy.md says why neither is the default.
 Each is reported in ``Result.attrs["skips"]`` with the FFT work it saved.
 """
@@ -29,17 +31,20 @@ import numpy as np
 from . import __version__
 from .backends import get_backend
 from .errors import InputError, shape_text
-from .fista import Fista, Rules
+from .algorithms import ALGORITHMS
+from .auto_weights import AutoWeights
+from .driver import Driver, Rules
 from .io import require_finite
 from .noise import residual_noise
 from .model import ForwardModel
 from .phases import Phases
 from .tracker import Tracker, in_data_units
-from .priors import PRIORS, ProxAverage, build_priors, singular_values
+from .priors import PRIORS, build_priors, singular_values
 from .problem import Problem
 from .settings import Settings
 from .skips import bands_line, field_line, plan_geometry, terms_line
-from .state import SolverState
+from .spaces import LastLipschitz, Spaces
+from .state import SolverState, Start
 
 __all__ = ["Result", "Settings", "Solver", "reconstruct"]
 
@@ -85,7 +90,7 @@ class Solver:
                                   skip_unseen=self.settings.skip)
         self.lipschitz = self.model.lipschitz()
         self.b = None          # the measurement being solved, divided by max|b|, on the device
-        self.subspace_lipschitz = None     # (basis digest, L) of the last spectral subspace: reused for the same basis
+        self.last_lipschitz = LastLipschitz()    # L of the last spectral subspace: reused for the same basis
 
     def solve(self, measurement: np.ndarray, x0: np.ndarray | None = None,
               progress: Callable[[dict], None] | None = None, snapshots=(), state: SolverState | None = None,
@@ -97,8 +102,8 @@ class Solver:
         field instead and carries its basis, rank, step and weights (:mod:`clsdcam.state`); ``snapshots`` lists
         iterations at which a copy of the cube is kept in ``Result.snapshots`` (e.g. to measure accuracy);
         ``iters`` overrides ``Settings.iters`` for this solve (a stream's cold and warm frames); ``stop_at_fit``
-        stops it (reason "fit") once ‖Ay − b‖/‖b‖ at FISTA's point y is at most that (e.g. the previous frame's
-        fit: a frame that changed little stops early, one that changed more gets the iterations).
+        stops it (reason "fit") once ‖Ay − b‖/‖b‖ at the algorithm's gradient point is at most that (e.g. the
+        previous frame's fit: a frame that changed little stops early, one that changed more gets the iterations).
         """
         b = self._checked(measurement)
         scale = float(np.max(np.abs(b)))
@@ -106,42 +111,39 @@ class Solver:
             return self._result(self.model.embed(np.zeros(self._cube_window_shape())), 1.0, [], "zero measurement")
         be, s = self.backend, self.settings
         self.b = be.to_device(b / scale)
-        fresh = DataReferences(self).value
-        priors = build_priors(be, s, fresh if state is None else state.reference(fresh))
-        if state is not None:
-            state.apply_weights(priors)
-        problem = self.band_problem(priors)
-        start = self._start(x0, scale) if state is None else be.scale(self.calibration.scale / scale, state.field)
-        step = (state.step_factor if state else s.step_scale) / self.lipschitz
-        entering = state is not None and state.basis is not None    # the carried basis at once: no band-space F(x0)
-        loop = Fista(be, start, step=step, objective=None if entering else problem.objective,
-                     rules=Rules(tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart))
-        tracker = Tracker(self.model, scale, snapshots, progress)
+        start = state.start(be, self.calibration.scale / scale) if state else self._start(x0, scale)
+        priors = build_priors(be, s, start.reference(DataReferences(self.model, self.b, self.lipschitz).value))
+        start.apply_weights(priors)
+        spaces = Spaces(self.model, self.b, priors, self.calibration.filters, self.lipschitz, self.last_lipschitz)
+        rules = Rules(tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart)
+        algorithm = ALGORITHMS[s.algorithm](be, start.field, start.step_factor / self.lipschitz, rules)
+        driver = Driver(algorithm, rules, None if start.basis is not None else spaces.band.objective)  # a carried
+        tracker = Tracker(self.model, scale, snapshots, progress)               # basis is entered at once: no F(x0)
         off = [row.name for row in PRIORS if row.name not in {p.name for p in priors}]
         tracker.report.lines += [line for line in (field_line(self.geometry), self._bands_line(), terms_line(off))
                                  if line]
-        phases = Phases(self, loop, tracker, priors, iters or s.iters, self._fit_rule(loop, stop_at_fit))
-        reason, problem = phases.run(problem, warm_started=x0 is not None or state is not None,
-                                     basis=state.basis if state else None, core=state.core if state else 0)
+        weights = AutoWeights(priors, tracker.report.lines)
+        phases = Phases(driver, spaces, tracker, s, iters or s.iters, (weights,), self._fit_rule(driver, stop_at_fit))
+        reason = phases.run(start.warm, start.basis, start.core)
         tracker.report.lines += [line for line in (phases.refreshes_line(),) if line]
-        field = problem.solution(loop.x)
-        out = self._result(field, scale, loop.history, reason, priors, loop.step, tracker)
-        out.attrs.update({f"{p.name}_chosen": p.relative for p in priors}, **phases.chosen)
-        fit, structure = self._residual_figures(problem, loop.x)
+        field = phases.problem.solution(driver.x)
+        out = self._result(field, scale, driver.history, reason, priors, driver.step, tracker)
+        out.attrs.update({f"{p.name}_chosen": p.relative for p in priors}, **weights.chosen)
+        fit, structure = self._residual_figures(phases.problem, driver.x)
         out.attrs.update(relative_residual=fit, residual_to_noise=structure)
         out.snapshots = tracker.kept
-        out.state = SolverState(be.scale(scale / self.calibration.scale, field), phases.basis(), phases.core(),
+        out.state = SolverState(be.scale(scale / self.calibration.scale, field), phases.basis(), phases.core,
                                 phases.step_factor(), {p.name: p.relative for p in priors}, fit,
                                 {p.reference: p.unit for p in priors})
         return out
 
-    def _fit_rule(self, loop: Fista, fit: float | None):
-        """FISTA's should_stop for ``stop_at_fit``: "fit" once the record's data term ½‖Ay − b‖² is at most
+    def _fit_rule(self, driver: Driver, fit: float | None):
+        """The driver's should_stop for ``stop_at_fit``: "fit" once the record's data term ½‖Ay − b‖² is at most
         ½ fit²·‖b‖² (None: no such rule)."""
         if not fit:
             return None
         target = 0.5 * fit ** 2 * self.backend.vdot(self.b, self.b)
-        return lambda: "fit" if loop.history and loop.history[-1]["data"] <= target else None
+        return lambda: "fit" if driver.history and driver.history[-1]["data"] <= target else None
 
     def _residual_figures(self, problem: Problem, x) -> tuple[float, float]:
         """(‖r‖/‖b‖, rms(r)/σ̂(r)) of the final residual r = Av − b: how much of the measurement the cube leaves
@@ -156,11 +158,6 @@ class Solver:
         rms = float(np.sqrt(np.mean(np.square(r, dtype=np.float64))))
         return (float(np.linalg.norm(r)) / norm if norm > 0 else 0.0), (rms / sigma if sigma > 0 else 0.0)
 
-    def band_problem(self, priors: list) -> Problem:
-        """The problem on the band cube (the full problem)."""
-        average = ProxAverage(self.backend, priors, self.model.cube_shape)
-        return Problem(self.model, self.b, average.prox, average.value, self.model.n_bands)
-
     # ---- pieces -------------------------------------------------------------------------
     def _check_memory(self):
         """Devices with their own memory say up front (InputError) when the problem cannot fit."""
@@ -171,8 +168,11 @@ class Solver:
     def _bands_line(self):
         return bands_line(self.calibration.filters) if self.settings.skip else None
 
-    def _start(self, x0, scale: float):
-        """The first iterate: zero, a (K, H, W) sensor-window cube (zero around it), or a whole field."""
+    def _start(self, x0, scale: float) -> Start:
+        """A start without a state: zero, a (K, H, W) sensor-window cube (zero around it), or a whole field."""
+        return Start(self._first_iterate(x0, scale), self.settings.step_scale, warm=x0 is not None)
+
+    def _first_iterate(self, x0, scale: float):
         if x0 is None:
             return self.model.embed(np.zeros(self._cube_window_shape()))
         x0 = np.asarray(x0) * self.calibration.scale / scale
@@ -208,7 +208,7 @@ class Solver:
             "stop_reason": reason,
             "lipschitz": self.lipschitz,
             "final_step": step,
-            **{f"{key}s": sum(bool(r[key]) for r in history) for key in ("restart", "rollback", "backoff")},
+            **{f"{key}s": sum(bool(r.get(key)) for r in history) for key in ("restart", "rollback", "backoff")},
             "data_scale": scale,
             "field_shape": model.field_shape,
             "window_offset": model.offset,
@@ -225,30 +225,26 @@ class Solver:
 
 
 class DataReferences:
-    """What a relative prior weight of 1 means for the current (normalised) measurement, each computed on
+    """What a relative prior weight of 1 means for a (normalised) measurement b on the device, each computed on
     first use: ``atb_max`` = ‖Aᵀb‖_∞, ``atb_sigma1`` = σ₁(Aᵀb), ``lipschitz`` = L (see :mod:`clsdcam.priors`)."""
 
-    def __init__(self, solver: Solver):
-        self.solver = solver
+    def __init__(self, model, b, lipschitz: float):
+        self.model, self.b, self.lipschitz = model, b, lipschitz
 
     def value(self, name: str) -> float:
         return float(getattr(self, name))
 
     @cached_property
     def atb(self):
-        return self.solver.model.adjoint(self.solver.b)
+        return self.model.adjoint(self.b)
 
     @cached_property
     def atb_max(self) -> float:
-        return self.solver.backend.amax(self.atb)
+        return self.model.backend.amax(self.atb)
 
     @cached_property
     def atb_sigma1(self) -> float:
-        return float(singular_values(self.solver.backend, self.atb).max())
-
-    @property
-    def lipschitz(self) -> float:
-        return self.solver.lipschitz
+        return float(singular_values(self.model.backend, self.atb).max())
 
 
 def reconstruct(measurement, calibration, backend="numpy", device: str | None = None, x0=None,

@@ -2,7 +2,6 @@
 solver's, snapshots of the cube, and progress reports in data units."""
 from __future__ import annotations
 
-import math
 from typing import Callable
 
 import numpy as np
@@ -13,7 +12,7 @@ from .skips import SkipReport
 
 
 def in_data_units(record: dict, scale: float) -> dict:
-    """A copy of a FISTA record (solver units, b / max|b|) with the data term and objective in data units (×s²)."""
+    """A copy of a driver's record (solver units, b / max|b|) with the data term and objective in data units (×s²)."""
     return {**record, "data": record["data"] * scale ** 2, "objective": record["objective"] * scale ** 2}
 
 
@@ -29,17 +28,18 @@ class Tracker:
         self.report = SkipReport()
         self.voxels = model.geometry.voxels_per_band
         self.paper_voxels = centred_geometry(model.sensor_shape).voxels_per_band
-        self.full_transforms = 4 * model.n_bands        # the full solver's gradient step
+        self.full_transforms = 4 * model.n_bands        # the full solver's gradient (a forward and an adjoint)
 
     def on(self, problem: Problem):
-        """FISTA's on_iteration callback for iterations in ``problem``'s space: adds the rank and transforms to
-        the record (its numbers stay in solver units: FISTA's rules compare them); progress gets data units."""
+        """The driver's on_iteration callback for iterations in ``problem``'s space: adds the rank to the record
+        and counts the transforms the algorithm and checkpoints report, against the same work in the full solver's
+        band space (its numbers stay in solver units: the driver's rules compare them); progress gets data units."""
+        per_gradient = problem.transforms()
+
         def on_iteration(record: dict, x):
-            evaluated = math.isfinite(record["objective"])
-            transforms = problem.transforms() * (3 if evaluated else 2) // 2     # + a forward for F(x)
             record["rank"] = problem.rank
-            record["transforms"] = transforms
-            self.count(transforms, self.full_transforms * (3 if evaluated else 2) // 2)
+            transforms = record["transforms"]
+            self.count(transforms, transforms * self.full_transforms / per_gradient if per_gradient else 0)
             if record["iteration"] in self.snapshots:
                 self.kept[record["iteration"]] = (self.model.window(problem.solution(x)) * self.scale).astype(np.float32)
             if self.progress is not None:

@@ -23,7 +23,7 @@ from clsdcam.batch import BatchSpec, FrameSource, parts, parts_dir, run_batch, s
 from clsdcam.calibration import Calibration, PixelMask, Preprocessing, preprocess
 from clsdcam.cli import main
 from clsdcam.errors import InputError
-from clsdcam.fista import Fista
+from clsdcam.algorithms.fista import Fista
 from clsdcam.provenance import provenance, sha256
 from clsdcam.sim.video import simulate_video, write_video
 from clsdcam.solver import Settings, Solver, reconstruct
@@ -186,7 +186,7 @@ def test_ctrl_c_says_how_many_frames_were_kept(video, tmp_path, monkeypatch, cap
 
 def test_a_ctrl_c_the_solver_caught_stops_the_batch(video, tmp_path, monkeypatch):
     """FISTA turns Ctrl-C into the stop reason "interrupted"; in a batch that frame is not done and the batch stops."""
-    iterate, calls = Fista._iterate, []
+    iterate, calls = Fista.iterate, []
 
     def interrupted(self, *args):
         calls.append(True)
@@ -194,7 +194,7 @@ def test_a_ctrl_c_the_solver_caught_stops_the_batch(video, tmp_path, monkeypatch
             raise KeyboardInterrupt
         return iterate(self, *args)
 
-    monkeypatch.setattr(Fista, "_iterate", interrupted)
+    monkeypatch.setattr(Fista, "iterate", interrupted)
     with pytest.raises(KeyboardInterrupt):
         run_batch(spec(video, iters=10), tmp_path / "out.h5", workers=0, chunk=2)
     assert not parts_dir(tmp_path / "out.h5").exists()

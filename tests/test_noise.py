@@ -6,7 +6,7 @@ from clsdcam.errors import InputError
 from clsdcam.noise import residual_noise
 from clsdcam.priors import AUTO, TotalVariation
 from clsdcam.settings import Settings
-from clsdcam.phases import AUTO_AT
+from clsdcam.auto_weights import AUTO_AT
 from clsdcam.sim import noiseless_measurement, simulate
 from clsdcam.solver import reconstruct
 

@@ -6,7 +6,8 @@ import pytest
 
 from clsdcam import Settings, Solver
 from clsdcam.metrics import psnr, spectral_angle
-from clsdcam.phases import CHECK_EVERY, WARMUP, Phases
+from clsdcam.phases import Phases
+from clsdcam.space_policy import CHECK_EVERY, WARMUP
 from clsdcam.sim import band_wavelengths, simulate
 from clsdcam.sim.kinds import make_kind
 from clsdcam.sim.scenes import FAINT_LINE
@@ -91,7 +92,7 @@ def test_a_late_entry_keeps_improving(monkeypatch):
     projected entry point can score an objective the subspace's iteration never reaches again, so it must not
     become the best iterate the checkpoints roll back to (before the fix: a rollback at every checkpoint and the
     PSNR frozen from iteration 100 on this scene)."""
-    monkeypatch.setattr("clsdcam.phases.ENTRY_TAIL", 0.02)     # a basis holding 98% of the lit spectra: 32 vectors
+    monkeypatch.setattr("clsdcam.space_policy.ENTRY_TAIL", 0.02)     # a basis holding 98% of the lit spectra: 32 vectors
     sim = simulate(scene="target", shape=(96, 128), n_bands=64, seed=0)
     result = Solver(sim.calibration, settings=Settings(iters=150, subspace=True)).solve(sim.measurement,
                                                                                        snapshots=[100, 150])

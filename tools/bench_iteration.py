@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from authors_baseline import AuthorsSolver  # noqa: E402
 
 from clsdcam.backends.host_convolution import CHUNK_BYTES  # noqa: E402
-from clsdcam.phases import WARMUP  # noqa: E402
+from clsdcam.space_policy import WARMUP  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
 from clsdcam.solver import Settings, Solver  # noqa: E402
 

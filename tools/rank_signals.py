@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_accuracy import panel_parser, report, save_json, size_text  # noqa: E402  (the panel's scenes and options)
 
-from clsdcam.phases import ENTRY_TAIL, MAX_RANK_FRACTION  # noqa: E402
+from clsdcam.space_policy import ENTRY_TAIL, MAX_RANK_FRACTION  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
 from clsdcam.solver import Settings, Solver  # noqa: E402
 from clsdcam.subspace import Spectra, lit_shapes  # noqa: E402

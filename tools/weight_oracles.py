@@ -30,7 +30,7 @@ from bench_panel import panel_kinds, panel_scene, scene_plan, sweep_weights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.model import ForwardModel
-from clsdcam.phases import AUTO_AT
+from clsdcam.auto_weights import AUTO_AT
 from clsdcam.solver import Settings, Solver
 
 CG_TOL = 1e-8        # relative residual at which the conjugate gradients stop early

@@ -118,10 +118,13 @@ def add_backend_options(p: argparse.ArgumentParser):
 
 def add_solver_options(p: argparse.ArgumentParser):
     """The solver's options: iterations, one weight per prior of the table, stopping rules, skips, backend."""
+    from ..algorithms import ALGORITHMS
     from ..priors import PRIORS
     from ..settings import DEFAULT_ITERS
 
-    p.add_argument("--iters", type=positive_int, default=DEFAULT_ITERS, help=f"FISTA iterations (default {DEFAULT_ITERS})")
+    p.add_argument("--iters", type=positive_int, default=DEFAULT_ITERS, help=f"iterations (default {DEFAULT_ITERS})")
+    p.add_argument("--algorithm", default="fista", choices=tuple(ALGORITHMS),
+                   help="the algorithm the solve runs (default fista: FISTA with adaptive restart)")
     for row in PRIORS:
         p.add_argument(row.flag, dest=row.name, type=weight(row.prior.auto_weight is not None), default=row.default,
                        metavar="W|auto" if row.prior.auto_weight else "W", help=f"{row.help} (default {row.default})")
@@ -219,7 +222,7 @@ def settings_from(args):
     from ..priors import PRIORS
     from ..settings import Settings
 
-    return Settings(iters=args.iters, tv_weights=args.tv_weights, tol=args.tol, plateau=args.plateau, rank=args.rank,
+    return Settings(iters=args.iters, algorithm=args.algorithm, tv_weights=args.tv_weights, tol=args.tol, plateau=args.plateau, rank=args.rank,
                     subspace=args.subspace, support_field=args.support_field, skip=not args.no_skip, dtype=args.dtype,
                     full_field=getattr(args, "full_field", False),
                     **{row.name: getattr(args, row.name) for row in PRIORS})

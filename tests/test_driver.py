@@ -1,25 +1,14 @@
-"""The FISTA loop: the t_k sequence, a closed-form problem, stopping rules and safeguards."""
-import math
+"""The driver (clsdcam.driver) running FISTA: a closed-form problem, stopping rules, checkpoints, back-off, Ctrl-C,
+moves between spaces."""
 
 import numpy as np
 import pytest
 
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.fista import fista, next_momentum
+from clsdcam.algorithms.fista import Fista
+from clsdcam.driver import Driver, Functions, Rules, minimize
 
 BACKEND = NumpyBackend("float64")
-
-
-def test_momentum_sequence():
-    t = [1.0]
-    for _ in range(5):
-        t.append(next_momentum(t[-1]))
-    expected = [1.0, (1 + math.sqrt(5)) / 2]
-    expected.append((1 + math.sqrt(1 + 4 * expected[-1] ** 2)) / 2)
-    np.testing.assert_allclose(t[:3], expected, rtol=1e-15)
-    # t_k ≥ (k + 1)/2, the bound behind the O(1/k²) rate; the authors' 1 + √(1+4t²)/2 violates t² − t ≤ t_prev²
-    assert all(tk >= (k + 2) / 2 for k, tk in enumerate(t))
-    assert all(abs(t[k] ** 2 - t[k] - t[k - 1] ** 2) < 1e-12 for k in range(1, len(t)))
 
 
 class Quadratic:
@@ -36,7 +25,7 @@ class Quadratic:
         out[...] = y - step * (self.a.T @ residual)
         return 0.5 * residual @ residual
 
-    def prox(self, z, out, step):  # prox of step·(μ/2)‖x‖²
+    def prox(self, z, step, out):  # prox of step·(μ/2)‖x‖²
         out[...] = z / (1 + step * self.mu)
 
     def objective(self, x):
@@ -44,8 +33,14 @@ class Quadratic:
         return 0.5 * residual @ residual + 0.5 * self.mu * x @ x
 
     def run(self, step_scale=1.0, **kwargs):
-        return fista(self.gradient_step, self.prox, BACKEND, np.zeros_like(self.exact),
-                     step=step_scale / self.lipschitz, **kwargs)
+        return minimize(self.gradient_step, self.prox, BACKEND, np.zeros_like(self.exact),
+                        step=step_scale / self.lipschitz, **kwargs)
+
+    def driver(self):
+        """FISTA under the driver, from zero, with step 1/L and F checkpoints; and this problem for it."""
+        rules = Rules()
+        fista = Fista(BACKEND, np.zeros_like(self.exact), 1 / self.lipschitz, rules)
+        return Driver(fista, rules, self.objective), Functions(self.gradient_step, self.prox)
 
 
 @pytest.mark.parametrize("restart", [False, True])
@@ -125,39 +120,37 @@ def test_ctrl_c_returns_the_best_iterate():
 
 
 def test_a_run_in_phases_through_an_identity_change_of_space_is_the_same_run():
-    """Fista.change_space keeps x, x_prev, y and t: phases joined by the identity reproduce one run exactly."""
-    from clsdcam.fista import Fista, Rules
-
+    """Driver.move keeps FISTA's x, x_prev, y and t: phases joined by the identity reproduce one run exactly."""
     problem = Quadratic(7, m=40, n=40, mu=1e-3)
     whole = problem.run(iters=120, objective=problem.objective)
-    loop = Fista(BACKEND, np.zeros_like(problem.exact), step=1 / problem.lipschitz, objective=problem.objective,
-                 rules=Rules())
+    driver, functions = problem.driver()
     for mapping in (lambda a: a.copy(), lambda a: a, lambda a: a.copy(), lambda a: a):
-        assert loop.run(problem.gradient_step, problem.prox, 30) is None
-        loop.change_space(mapping, 1 / problem.lipschitz, problem.objective)
-    assert loop.iterations == 120
-    np.testing.assert_array_equal(loop.x, whole.x)
+        assert driver.run(functions, 30) is None
+        driver.move(mapping, 1 / problem.lipschitz, problem.objective)
+    assert driver.iterations == 120
+    np.testing.assert_array_equal(driver.x, whole.x)
 
 
 def test_a_change_of_space_of_the_same_size_writes_into_the_iterates_arrays():
     """No new arrays when the space keeps its size (the mapping's own results aside), distinct ones when it
     changes; a change of objective keeps the iterates and momentum and scores x under the new objective."""
-    from clsdcam.fista import Fista, Rules
-
     problem = Quadratic(7, m=40, n=40, mu=1e-3)
-    loop = Fista(BACKEND, np.zeros_like(problem.exact), step=1 / problem.lipschitz, objective=problem.objective,
-                 rules=Rules())
-    loop.run(problem.gradient_step, problem.prox, 10)
-    before = [loop.x, loop.x_prev, loop.y, loop.z, loop.best]
-    loop.change_space(lambda a: a.copy(), 1 / problem.lipschitz, problem.objective)
-    after = [loop.x, loop.x_prev, loop.y, loop.z, loop.best]
-    assert all(a is b for a, b in zip(before, after))
-    x, t = loop.x.copy(), loop.t
-    loop.change_objective(lambda v: 2 * problem.objective(v))
-    assert loop.t == t and loop.best_objective == pytest.approx(2 * problem.objective(x))
-    np.testing.assert_array_equal(loop.best, x)
-    loop.change_space(lambda a: a[:20].copy(), 1 / problem.lipschitz)
-    assert loop.x.shape == (20,) and len({id(a) for a in (loop.x, loop.x_prev, loop.y, loop.z, loop.best)}) == 5
+    driver, functions = problem.driver()
+    fista, checkpoints = driver.algorithm, driver.checkpoints
+
+    def arrays():
+        return [fista.x, fista.x_prev, fista.y, fista.z, checkpoints.best]
+
+    driver.run(functions, 10)
+    before = arrays()
+    driver.move(lambda a: a.copy(), 1 / problem.lipschitz, problem.objective)
+    assert all(a is b for a, b in zip(before, arrays()))
+    x, t = fista.x.copy(), fista.t
+    driver.rescore(lambda v: 2 * problem.objective(v))
+    assert fista.t == t and checkpoints.best_objective == pytest.approx(2 * problem.objective(x))
+    np.testing.assert_array_equal(checkpoints.best, x)
+    driver.move(lambda a: a[:20].copy(), 1 / problem.lipschitz)
+    assert fista.x.shape == (20,) and len({id(a) for a in arrays()}) == 5
 
 
 def test_fista_stops_on_an_objective_plateau():

@@ -1,0 +1,88 @@
+"""FISTA (Beck & Teboulle 2009) as one step object; the driver (:mod:`clsdcam.driver`) runs it. With step s:
+
+    z   = y − s·∇f(y)                       (problem.gradient_step)
+    x⁺  = prox_{s·g}(z)                     (problem.prox)
+    t⁺  = (1 + √(1 + 4t²)) / 2
+    y⁺  = x⁺ + ((t − 1)/t⁺)·(x⁺ − x)         (extrapolate)
+
+with adaptive restart (O'Donoghue & Candès 2015, gradient scheme): when ⟨y − x⁺, x⁺ − x⟩ > 0 the momentum
+points uphill, so t ← 1 (y⁺ = x⁺). The two vector passes are the backend's fusions ``fista_stats`` and
+``extrapolate`` when it has them, else built from its primitives (:func:`stats_from_primitives`,
+:func:`extrapolate_from_primitives`): a backend without them still runs.
+"""
+from __future__ import annotations
+
+import math
+
+from .base import place, ratio
+
+
+def next_momentum(t: float) -> float:
+    """t⁺ = (1 + √(1 + 4t²)) / 2  (the authors' Python has 1 + √(1 + 4t²)/2, a bug)."""
+    return (1.0 + math.sqrt(1.0 + 4.0 * t * t)) / 2.0
+
+
+def stats_from_primitives(backend, x_new, x_old, y, scratch) -> tuple[float, float, float]:
+    """(‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩) with d = x⁺ − x in ``scratch``: ⟨y − x⁺, d⟩ = ⟨y, d⟩ − ⟨x⁺, d⟩."""
+    d = backend.axpy(-1.0, x_old, x_new, out=scratch)
+    return backend.vdot(d, d), backend.vdot(x_new, x_new), backend.vdot(y, d) - backend.vdot(x_new, d)
+
+
+def extrapolate_from_primitives(backend, x_new, x_old, beta: float, out):
+    """out = (1 + β)·x⁺ − β·x (``out`` distinct from both)."""
+    backend.scale(1.0 + beta, x_new, out=out)
+    return backend.axpy(-beta, x_old, out, out=out)
+
+
+class Fista:
+    """FISTA's iterates (x, x_prev, y, z) and momentum t (see the module docstring)."""
+
+    name = "fista"
+
+    def __init__(self, backend, x0, step: float, rules):
+        self.backend = backend
+        self.step = step
+        self.restart = rules.restart
+        self.t = 1.0
+        self.x = self.x_prev = self.y = self.z = None
+        self._place([x0] * 4)
+        self._fused_stats = getattr(backend, "fista_stats", None)
+        self._fused_extrapolate = getattr(backend, "extrapolate", None)
+
+    def iterate(self, problem) -> dict:
+        """One FISTA step with the adaptive restart test."""
+        data = problem.gradient_step(self.y, self.z, self.step)
+        self.x, self.x_prev = self.x_prev, self.x
+        problem.prox(self.z, self.step, self.x)
+        step_sq, norm_sq, slope = self._stats()            # ‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩
+        uphill = self.restart and slope > 0
+        if uphill:
+            self.t = 1.0
+        t_next = next_momentum(self.t)
+        self._extrapolate((self.t - 1.0) / t_next)       # y = x⁺ + β(x⁺ − x)
+        self.t = t_next
+        return {"data": data, "change": ratio(step_sq, norm_sq), "momentum": self.t, "restart": bool(uphill),
+                "transforms": problem.transforms()}
+
+    def reset(self, point) -> None:
+        for array in (self.x, self.x_prev, self.y):
+            self.backend.copy(point, out=array)
+        self.t = 1.0
+
+    def move(self, mapping) -> None:
+        x, x_prev, y = (mapping(a) for a in (self.x, self.x_prev, self.y))
+        self._place([x, x_prev, y, x])
+
+    def _stats(self) -> tuple[float, float, float]:
+        if self._fused_stats is not None:
+            return self._fused_stats(self.x, self.x_prev, self.y)
+        return stats_from_primitives(self.backend, self.x, self.x_prev, self.y, self.z)   # z is free after the prox
+
+    def _extrapolate(self, beta: float):
+        if self._fused_extrapolate is not None:
+            return self._fused_extrapolate(self.x, self.x_prev, beta, out=self.y)
+        return extrapolate_from_primitives(self.backend, self.x, self.x_prev, beta, self.y)
+
+    def _place(self, sources):
+        """x, x_prev, y, z ← copies of ``sources`` (z: scratch, first written by the gradient step)."""
+        self.x, self.x_prev, self.y, self.z = place(self.backend, [self.x, self.x_prev, self.y, self.z], sources)

@@ -1,0 +1,34 @@
+"""Automatic prior weights as a hook of the phases (:mod:`clsdcam.phases`): weights set to ``auto``
+(:mod:`clsdcam.priors`) start at their rule's start and are chosen at iteration ``AUTO_AT`` from the noise level of
+that iterate's residual (:func:`clsdcam.noise.residual_noise`, relative to max|b|), in every space (``--no-skip``
+too); the algorithm goes on with its momentum under the new objective."""
+from __future__ import annotations
+
+from .noise import residual_noise
+
+AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
+
+
+class AutoWeights:
+    """The auto-weighted priors of one solve, chosen once at AUTO_AT."""
+
+    def __init__(self, priors: list, report_lines: list[str]):
+        self.priors = priors
+        self.lines = report_lines
+        self.chosen: dict = {}          # what was chosen, for the result's attributes
+
+    def due_in(self, done: int, iters: int) -> int | None:
+        """Iterations from ``done`` until the hook acts, when that is within the next ``iters``; else None."""
+        pending = any(prior.auto for prior in self.priors)
+        return AUTO_AT - done if pending and done < AUTO_AT <= done + iters else None
+
+    def act(self, problem, driver) -> None:
+        """Choose from the noise σ̂ of the residual at the driver's iterate; the driver rescores under the new F."""
+        noise = residual_noise(problem.backend.to_host(problem.residual(driver.x)))
+        for prior in (prior for prior in self.priors if prior.auto):
+            prior.set_relative(prior.auto_weight.for_noise(noise))
+            prior.auto = False
+            self.lines.append(f"{prior.name}: auto, {prior.relative:.3g} (noise σ ≈ {noise:.3g} of max|b|, from the "
+                              f"residual at iteration {driver.iterations})")
+        self.chosen["noise_estimate"] = noise
+        driver.rescore(problem.objective)

@@ -1,0 +1,83 @@
+"""The spaces one solve's iterates can live in, as the phases (:mod:`clsdcam.phases`) see them: band space, the
+spectral subspace of a basis (:mod:`clsdcam.subspace`), the sensor window of an iterate, and the full-space step
+the subspace's checks take. Built by the solver for each solve; nothing here reaches the solver."""
+from __future__ import annotations
+
+import hashlib
+from functools import cached_property
+
+import numpy as np
+
+from .priors import ProxAverage
+from .problem import Problem
+from .subspace import SpectralSubspace
+
+
+class LastLipschitz:
+    """The Lipschitz constant of the last spectral basis a solver used (a stream's next frame carries its basis:
+    no second power iteration for it)."""
+
+    def __init__(self):
+        self.key, self.value = None, None
+
+    @staticmethod
+    def digest(basis: np.ndarray) -> str:
+        return hashlib.sha1(np.ascontiguousarray(basis, np.float64).tobytes()).hexdigest()
+
+    def get(self, basis: np.ndarray) -> float | None:
+        return self.value if self.key == self.digest(basis) else None
+
+    def set(self, basis: np.ndarray, value: float):
+        self.key, self.value = self.digest(basis), value
+
+
+class Spaces:
+    """Band space and the subspaces of one measurement b (normalised, on the device) under ``priors``."""
+
+    def __init__(self, model, b, priors: list, filters: np.ndarray, lipschitz: float, last: LastLipschitz):
+        self.model = model
+        self.backend = model.backend
+        self.b = b
+        self.priors = priors
+        self.filters = filters
+        self.lipschitz = lipschitz           # band space's
+        self.n_bands = model.n_bands
+        self._last = last
+        self._buffers: dict = {}
+
+    @cached_property
+    def band(self) -> Problem:
+        """The problem on the band cube (the full problem)."""
+        average = ProxAverage(self.backend, self.priors, self.model.cube_shape)
+        return Problem(self.model, self.b, average.prox, average.value, self.n_bands)
+
+    def subspace(self, basis: np.ndarray, start=None) -> Problem:
+        """The problem on ``basis`` (its L by a power iteration from ``start``, unless the last basis was the same)."""
+        sub = SpectralSubspace(self.model, basis, self.priors, self.filters, start, self._last.get(basis))
+        self._last.set(basis, sub.lipschitz)
+        return Problem(sub.model, self.b, sub.prox, sub.penalty, sub.rank, subspace=sub)
+
+    def window(self, x) -> np.ndarray:
+        """The sensor window of a band cube, on the host."""
+        return self.model.window(x)
+
+    def full_step(self, problem: Problem, c, step: float) -> tuple[float, np.ndarray, np.ndarray]:
+        """One full proximal-gradient step from v = B·c, x⁺ = prox(v − step·Aᵀ(Av − b)): (the relative fall of the
+        data term, the windows of v and of x⁺). Counts as A·B·c, then Aᵀr and A·x⁺."""
+        full, sub = self.band, problem.subspace
+        data = problem.data(c)                         # its residual A·B·c − b = A·v − b stays in place
+        v = sub.expand(c)
+        before = self.window(v)
+        z = self.model.adjoint(problem.residual_buffer, out=self._cube("z"), y=v, step=step)
+        stepped = full.prox(z, step, self._cube("stepped"))
+        gain = (data - full.data(stepped)) / data if data > 0 else 0.0
+        return gain, before, self.window(stepped)
+
+    def full_step_transforms(self, problem: Problem) -> int:
+        return problem.transforms() // 2 + self.band.transforms()
+
+    def _cube(self, name: str):
+        """A band cube for the checks (allocated at the first)."""
+        if name not in self._buffers:
+            self._buffers[name] = self.backend.empty(self.model.cube_shape)
+        return self._buffers[name]
