@@ -85,6 +85,11 @@ class Checkpoints:
         self.algorithm.reset(self.best)
         return {"backoff": True, "rollback": True, "step": self.algorithm.step}
 
+    def fall_since_last(self, value: float) -> float:
+        """How far F fell from the last checkpoint's value to ``value``, which becomes the last (the plateau rule)."""
+        previous, self.last_checkpoint = self.last_checkpoint, value
+        return previous - value
+
     def restore(self):
         """x ← the best iterate (an interrupted run returns it)."""
         if self.active:

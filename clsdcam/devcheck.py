@@ -7,31 +7,30 @@ Sections, each a list of rows (name, detail, ok; ok None for figures that pass o
   :func:`~clsdcam.backends.cl_devices.problem_bytes`: band space, the most bands of that field that fit, a
   subspace of K/2 coefficients, one field cube; fails when band space (what the solver checks up front) does not
   fit;
-* parity: every primitive of the contract (``backends/base.py``) against NumPy at two sizes, on each path
-  the device runs (host and device on CPU devices, device elsewhere), float32; tolerances relative to
-  max|reference|: 1e-6 elementwise (1e-5 for band mixes, sums of K products), 1e-5 reductions,
-  2e-6 + 5e-7·log10 N for FFTs (pyvkfft's own);
+* parity: every primitive case (``backends/cases.py``: each primitive of the contract, its aliasing and special
+  arguments) against NumPy at two sizes, on each path the device runs (host and device on CPU devices, device
+  elsewhere), float32; the cases' tolerances, relative to max|reference|: 1e-6 elementwise (band mixes
+  included), 1e-5 reductions, 2e-6 + 5e-7·log10 N for FFTs (pyvkfft's own);
 * reconstruction: 30 FISTA iterations with every prior, band space then a rank-3 subspace, against NumPy
   (relative L2 ≤ 1e-4), on each path;
 * fft: each FFT engine's fft2 + ifft2 of a 16 × 256 × 256 cube (ms);
-* bandwidth: the device's buffer copy (the roof) and each bandwidth-bound kernel's GB/s (minimum bytes
-  read + written / median time, device path) as a fraction of it.
+* bandwidth: the device's buffer copy (the roof) and each primitive's benchmark case's GB/s (minimum bytes
+  read + written / median time, device path, a 16 × 256 × 256 cube) as a fraction of it.
 """
 from __future__ import annotations
 
-import math
 import statistics
 import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from .backends.cases import CASES, Inputs, benchmarks
 from .backends.numpy import NumpyBackend
 
 DEFAULT_PROBLEM = ((320, 448), (640, 896), 64)      # sensor, the paper's field, bands
-ELEMENTWISE, MIXES, REDUCTION = 1e-6, 1e-5, 1e-5
 SIZES = {"small": (3, (11, 15), (22, 30)), "medium": (16, (61, 83), (128, 180))}    # bands, sensor, field
-TIMED = (16, 256, 256)                                # the cube the timings use
+TIMED = (16, 256, 256)                                # the cube the timings use (the sensor: half its sides)
 REPEAT = 5
 
 
@@ -76,70 +75,16 @@ def memory_rows(be) -> list[Row]:
 
 
 # ---- parity ----------------------------------------------------------------------------------
-class Inputs:
-    """Seeded host arrays of one size: field cubes, a sensor window, filters, a spectrum and its transfer."""
-
-    def __init__(self, bands: int, sensor, field, seed: int = 0):
-        rng = np.random.default_rng(seed)
-        self.sensor, self.field_shape = tuple(sensor), tuple(field)
-        self.offset = ((field[0] - sensor[0]) // 2, (field[1] - sensor[1]) // 2)
-        half = (field[0], field[1] // 2 + 1)
-        self.field, self.other = (rng.standard_normal((bands, *field)).astype(np.float32) for _ in range(2))
-        self.window = rng.standard_normal((bands, *sensor)).astype(np.float32)
-        self.filters = rng.random((bands, *sensor)).astype(np.float32)
-        self.image = rng.standard_normal(sensor).astype(np.float32)
-        self.spectrum = (rng.standard_normal((bands, *half)) + 1j * rng.standard_normal((bands, *half))).astype(np.complex64)
-        self.transfer = (rng.standard_normal(half) + 1j * rng.standard_normal(half)).astype(np.complex64)
-        self.basis = np.linalg.qr(rng.standard_normal((bands, 2)))[0]
-        self.fft_tolerance = 2e-6 + 5e-7 * math.log10(field[0] * field[1])
-
-
-# primitive -> (call on a backend and an Inputs, tolerance kind); the memory primitives are in every call
-PRIMITIVES = {
-    "copy": (lambda be, a: be.copy(be.to_device(a.field)), "elementwise"),
-    "fft2": (lambda be, a: be.fft2(be.to_device(a.field)), "fft"),
-    "ifft2": (lambda be, a: be.ifft2(be.to_device(a.spectrum, True), a.field_shape), "fft"),
-    "cmul": (lambda be, a: be.cmul(be.to_device(a.spectrum, True), be.to_device(a.transfer, True), conj=True), "elementwise"),
-    "pad": (lambda be, a: be.pad(be.to_device(a.window), a.field_shape, a.offset), "elementwise"),
-    "crop": (lambda be, a: be.crop(be.to_device(a.field), a.sensor, a.offset), "elementwise"),
-    "mask_sum": (lambda be, a: be.mask_sum(be.to_device(a.filters), be.to_device(a.field), a.offset), "elementwise"),
-    "mask_spread": (lambda be, a: be.mask_spread(be.to_device(a.filters), be.to_device(a.image), a.field_shape, a.offset),
-                    "elementwise"),
-    "scale": (lambda be, a: be.scale(-0.37, be.to_device(a.field)), "elementwise"),
-    "axpy": (lambda be, a: be.axpy(-0.37, be.to_device(a.field), be.to_device(a.other)), "elementwise"),
-    "extrapolate": (lambda be, a: be.extrapolate(be.to_device(a.field), be.to_device(a.other), 0.61), "elementwise"),
-    "nonneg": (lambda be, a: be.nonneg(be.to_device(a.field)), "elementwise"),
-    "soft": (lambda be, a: be.soft(be.to_device(a.field), 0.4), "elementwise"),
-    "haar_tv": (lambda be, a: be.haar_tv(be.to_device(a.field), 0.05, (1.0, 0.5, 2.0), nonneg=True), "elementwise"),
-    "bandmix": (lambda be, a: be.bandmix(be.to_device(a.field), a.basis @ a.basis.T), "mixes"),
-    "subspace_tv": (lambda be, a: be.subspace_tv(be.to_device(a.field[:2]), a.basis, 0.05, (1.0, 1.0, 1.0)), "mixes"),
-    "vdot": (lambda be, a: be.vdot(be.to_device(a.field), be.to_device(a.other)), "reduction"),
-    "amax": (lambda be, a: be.amax(be.to_device(a.field)), "reduction"),
-    "l1_norm": (lambda be, a: be.l1_norm(be.to_device(a.field)), "reduction"),
-    "fista_stats": (lambda be, a: np.array(be.fista_stats(*(be.to_device(c) for c in (a.field, a.other, a.field[::-1].copy())))),
-                    "reduction"),
-    "tv_norm": (lambda be, a: be.tv_norm(be.to_device(a.field), (1.0, 0.5, 2.0)), "reduction"),
-    "gram": (lambda be, a: be.gram(be.to_device(a.field)), "reduction"),
-}
-
-
-def relative_error(got, ref) -> float:
-    got, ref = np.asarray(got, np.complex128), np.asarray(ref, np.complex128)
-    return float(np.max(np.abs(got - ref)) / (np.max(np.abs(ref)) or 1.0))
-
-
 def parity_rows(backends: dict) -> list[Row]:
-    """Each primitive on each path's backend against NumPy, at each size."""
+    """Each primitive case on each path's backend against NumPy, at each size."""
     ref, rows = NumpyBackend("float32"), []
     for size, (bands, sensor, field) in SIZES.items():
         a = Inputs(bands, sensor, field)
-        limits = {"elementwise": ELEMENTWISE, "mixes": MIXES, "reduction": REDUCTION, "fft": a.fft_tolerance}
         for path, be in backends.items():
-            for name, (call, kind) in PRIMITIVES.items():
-                got, want = call(be, a), call(ref, a)
-                error = relative_error(got if isinstance(got, (float, np.ndarray)) else be.to_host(got), want)
-                rows.append(Row("parity", f"{name} ({path} path, {size})", f"error {error:.1e} ≤ {limits[kind]:.1e}",
-                                error <= limits[kind]))
+            for name, case in CASES.items():
+                error, limit = case.error(be, ref, a), case.tolerance(a)
+                rows.append(Row("parity", f"{name} ({path} path, {size})", f"error {error:.1e} ≤ {limit:.1e}",
+                                error <= limit))
     return rows
 
 
@@ -193,20 +138,10 @@ def fft_rows(device) -> list[Row]:
 
 
 def bandwidth_rows(be) -> list[Row]:
-    """The device's copy bandwidth (the roof) and each bandwidth-bound kernel's GB/s as a share of it."""
+    """The device's copy bandwidth (the roof) and each primitive's benchmark case's GB/s as a share of it."""
     k, h, w = TIMED
-    rng = np.random.default_rng(0)
-    x, y, out = (be.to_device(rng.random(TIMED, np.float32)) for _ in range(3))
-    window, filters = (be.to_device(rng.random((k, h // 2, w // 2), np.float32)) for _ in range(2))
-    image, cube, small = be.to_device(rng.random((h // 2, w // 2), np.float32)), x.nbytes, x.nbytes // 4
-    kernels = {"copy": (lambda: be.copy(x, out=out), 2 * cube), "scale": (lambda: be.scale(0.5, x, out=out), 2 * cube),
-               "axpy": (lambda: be.axpy(0.5, x, y, out=out), 3 * cube),
-               "haar_tv": (lambda: be.haar_tv(x, 1e-3, (1.0, 1.0, 1.0), out=out), 2 * cube),
-               "pad": (lambda: be.pad(window, (h, w), (h // 4, w // 4), out=out), small + cube),
-               "mask_spread": (lambda: be.mask_spread(filters, image, (h, w), (h // 4, w // 4), out=out), small + cube),
-               "vdot": (lambda: be.vdot(x, y), 2 * cube), "fista_stats": (lambda: be.fista_stats(x, y, out), 3 * cube),
-               "bandmix": (lambda: be.bandmix(x, np.eye(k), out=out), 2 * cube), "gram": (lambda: be.gram(x), cube)}
-    speeds = {name: nbytes / median_ms(run, be.queue.finish) / 1e6 for name, (run, nbytes) in kernels.items()}
+    a = Inputs(k, (h // 2, w // 2), (h, w))
+    speeds = {case.name: case.moved(a) / median_ms(case.timed(be, a), be.queue.finish) / 1e6 for case in benchmarks()}
     roof = speeds["copy"]
     return [Row("bandwidth", name, f"{gbps:.1f} GB/s" + ("  (the roof)" if name == "copy" else f", {gbps / roof:.0%} of copy"))
             for name, gbps in speeds.items()]

@@ -105,9 +105,8 @@ class Driver:
         if rules.tol > 0 and not record.get("rollback") and record["change"] < rules.tol:
             return "tolerance"
         if rules.plateau > 0 and math.isfinite(record["objective"]) and not record.get("rollback"):
-            checkpoints = self.checkpoints
-            previous, checkpoints.last_checkpoint = checkpoints.last_checkpoint, record["objective"]
-            if record["iteration"] > 1 and previous - record["objective"] < rules.plateau * abs(record["objective"]):
+            fall = self.checkpoints.fall_since_last(record["objective"])
+            if record["iteration"] > 1 and fall < rules.plateau * abs(record["objective"]):
                 return "plateau"
         return should_stop() if should_stop is not None else None
 

@@ -6,15 +6,14 @@
 The scene field and the window in it are a :class:`~clsdcam.geometry.FieldGeometry`: the
 paper's 2H × 2W with the whole PSF frame by default, or the support-sized field of the
 ``--support-field`` option. The convolution is circular on the field, which equals the linear one on the
-sensor window (see geometry.py). The filtered convolution is built here from the backend's
-primitives (:mod:`clsdcam.convolution`: chunked host FFTs on the host path, whole-cube primitives on
-the device path, one operator). Knows nothing of the device.
+sensor window (see geometry.py). The filtered convolution is the backend's (``backend.convolution``,
+:mod:`clsdcam.backends.convolution`: chunked host FFTs on the host path, whole-cube primitives on the device
+path, one operator). Knows nothing of the device.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .convolution import filtered_convolution
 from .errors import InputError
 from .geometry import FieldGeometry, centred_geometry, default_field_shape, transfer_function, window_offset
 
@@ -39,8 +38,8 @@ class ForwardModel:
         self.n_bands = filters.shape[0]
         self.cube_shape = (self.n_bands,) + self.field_shape
         self.psf = psf
-        self.convolution = convolution or filtered_convolution(backend, transfer_function(psf, self.geometry), filters,
-                                                               self.field_shape, skip_unseen=skip_unseen)
+        self.convolution = convolution or backend.convolution(transfer_function(psf, self.geometry), filters,
+                                                              self.field_shape, skip_unseen=skip_unseen)
 
     def with_filters(self, filters: np.ndarray) -> "ForwardModel":
         """The same PSF and field with other filters (the spectral subspace's G_j = Σ_k B_kj F_k)."""

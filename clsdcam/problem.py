@@ -20,7 +20,7 @@ class Problem:
         self.model = model
         self.backend = model.backend
         self.b = b
-        self.prox = prox                 # prox(z, step, out): out = max(0, prox_{step·g}(E·z)) in the space's terms
+        self.prox = prox                 # prox(z, step, out): out = prox_{step·g}(z) in the space (g holds v ≥ 0)
         self.penalty = penalty
         self.rank = rank
         self.subspace = subspace

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from clsdcam.backends.base import Backend, protocol_members
+from clsdcam.backends.base import (FUSIONS, MAX_MATH, Backend, Fusions, Math, Platform, protocol_attributes,
+                                   protocol_members)
 from clsdcam.backends.numpy import NumpyBackend
 
 PACKAGE = Path(__file__).resolve().parents[1] / "clsdcam"
@@ -79,19 +80,59 @@ def test_no_module_above_400_lines():
     assert not long, long
 
 
+SOLVE_CORE = ("clsdcam.driver", "clsdcam.checkpoints", "clsdcam.algorithms", "clsdcam.phases", "clsdcam.space_policy",
+              "clsdcam.spaces", "clsdcam.auto_weights", "clsdcam.state", "clsdcam.tracker", "clsdcam.problem",
+              "clsdcam.subspace")
+
+
+def reachable(edges: dict[str, set[str]], start: str) -> set[str]:
+    seen, stack = set(), [start]
+    while stack:
+        for target in edges[stack.pop()] - seen:
+            seen.add(target)
+            stack.append(target)
+    return seen
+
+
+def test_the_loop_the_policy_and_the_spaces_never_reach_the_solver():
+    """No module of the loop, the policy or the spaces imports clsdcam.solver, directly or through another, or
+    takes a parameter named ``solver``."""
+    edges = graph()
+    core = [name for name in edges if name.startswith(SOLVE_CORE)]
+    assert len(core) >= len(SOLVE_CORE)
+    for name in core:
+        assert "clsdcam.solver" not in reachable(edges, name), name
+        tree = ast.parse(modules()[name].read_text(encoding="utf-8"))
+        parameters = {a.arg for node in ast.walk(tree) if isinstance(node, ast.arguments)
+                      for a in node.args + node.kwonlyargs}
+        assert "solver" not in parameters, name
+
+
 @pytest.mark.parametrize("implementation", ["numpy", "opencl"])
-def test_both_backends_keep_the_contract(implementation):
-    """Every primitive of backends/base.Backend exists on both backends with the contract's parameters."""
+@pytest.mark.parametrize("contract", [Math, Platform, Fusions], ids=lambda c: c.__name__)
+def test_both_backends_keep_the_contract(implementation, contract):
+    """Every method of backends/base's Math and Platform exists on both backends with the contract's parameters; so
+    do the optional Fusions, which both backends provide."""
     if implementation == "opencl":
         pytest.importorskip("pyopencl")
         from clsdcam.backends.opencl import OpenCLBackend as cls
     else:
         cls = NumpyBackend
-    assert len(protocol_members()) >= 28
-    for name in protocol_members():
-        contract = list(inspect.signature(getattr(Backend, name)).parameters)
-        assert list(inspect.signature(getattr(cls, name)).parameters) == contract, name
-    assert isinstance(NumpyBackend(), Backend)
+    for name in protocol_members(contract):
+        expected = list(inspect.signature(getattr(contract, name)).parameters)
+        assert list(inspect.signature(getattr(cls, name)).parameters) == expected, name
+
+
+def test_the_contract_is_narrow():
+    """Math has at most MAX_MATH methods; the fusions are apart from it; Backend is Math and Platform; the NumPy
+    backend is all three and says everything Platform asks."""
+    math, platform, fusions = (set(protocol_members(c)) for c in (Math, Platform, Fusions))
+    assert len(math) <= MAX_MATH and fusions == set(FUSIONS)
+    assert not math & platform and not (math | platform) & fusions
+    assert set(protocol_members(Backend)) == math | platform and "pad" in math and "convolution" in math
+    be = NumpyBackend()
+    assert isinstance(be, Backend) and isinstance(be, Fusions)
+    assert all(hasattr(be, name) for name in protocol_attributes(Platform))
 
 
 HEAVY = ("scipy", "h5py", "matplotlib", "pyopencl", "dask", "distributed", "clsdcam.solver", "clsdcam.sim",

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 
 import clsdcam.backends.host_convolution as host_convolution
+from clsdcam.backends.convolution import HostPathConvolution, PrimitiveConvolution
 from clsdcam.backends.host_convolution import HostConvolution, band_chunks
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.convolution import PrimitiveConvolution
 from clsdcam.geometry import support_geometry, transfer_function
 
 SENSOR, FIELD_PSF = (21, 34), ((4, 15), (6, 29))
@@ -75,3 +75,18 @@ def test_with_filters_shares_the_transfer_and_changes_the_bands(monkeypatch):
     other = host.with_filters(rng.random((2,) + SENSOR))
     assert other.n_bands == 2 and other.transfer is host.transfer
     assert other.adjoint(rng.random(SENSOR), np.empty((2,) + geometry.field)).shape == (2,) + geometry.field
+
+
+def test_the_numpy_backend_returns_the_host_pipeline(monkeypatch):
+    """``backend.convolution`` on NumPy (the host path): the chunked pipeline on the arrays themselves, unseen bands
+    skipped unless asked not to."""
+    rng = np.random.default_rng(4)
+    filters = rng.random((3,) + SENSOR)
+    filters[1] = 0.0
+    host, _, geometry = operators("float64", filters, 1 << 20, monkeypatch)
+    be = NumpyBackend("float64")
+    made = be.convolution(host.transfer, filters, geometry.field)
+    assert isinstance(made, HostPathConvolution) and made.transforms() == 8
+    assert be.convolution(host.transfer, filters, geometry.field, skip_unseen=False).transforms() == 12
+    v = rng.standard_normal((3,) + geometry.field)
+    np.testing.assert_array_equal(made.forward(v, np.empty(SENSOR)), host.forward(v, np.empty(SENSOR)))

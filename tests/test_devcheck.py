@@ -1,5 +1,6 @@
-"""Devices as ``clsdcam check`` and the solver see them: the memory plan of the default problem, a problem too large
-for the device (one line, exit 2, nothing solved), and which FFT engine ``auto`` picks on a GPU.
+"""Devices as ``clsdcam check`` and the solver see them: the memory plan of the default problem, the primitive cases
+it checks and times, a problem too large for the device (one line, exit 2, nothing solved), and which FFT engine
+``auto`` picks on a GPU.
 
 The device is the one ``cl_devices.choose_device()`` picks (PoCL in CI); its reported memory is lowered by
 replacing ``cl_devices.memory_limits``, and its type (for the engine rule) by replacing ``opencl.is_cpu``."""
@@ -10,7 +11,9 @@ from conftest import opencl_device
 pytestmark = pytest.mark.opencl
 DEVICE = opencl_device()
 
+from clsdcam import devcheck  # noqa: E402
 from clsdcam.backends import cl_devices, fft, opencl  # noqa: E402
+from clsdcam.backends.cases import CASES, benchmarks  # noqa: E402
 from clsdcam.cli import main  # noqa: E402
 from clsdcam.devcheck import DEFAULT_PROBLEM, memory_rows  # noqa: E402
 
@@ -50,6 +53,18 @@ def test_the_plan_says_how_many_bands_fit_a_small_device(monkeypatch, limit):
     fit = int(rows["bands of that field that fit"].detail)
     assert 0 < fit < BANDS
     assert cl_devices.shortfall(DEVICE, *needed(fit)) is None and cl_devices.shortfall(DEVICE, *needed(fit + 1))
+
+
+def test_check_runs_every_primitive_case_and_times_each_benchmark_case(monkeypatch):
+    """The parity rows are the case table's at both sizes, each within its case's tolerance; the bandwidth rows are
+    each primitive's benchmark case, copy (the roof) first."""
+    be = opencl.OpenCLBackend("float32", device=DEVICE, path="device")
+    rows = devcheck.parity_rows({"device": be})
+    assert [row.name for row in rows] == [f"{name} (device path, {size})" for size in devcheck.SIZES for name in CASES]
+    assert all(row.ok for row in rows), [row for row in rows if not row.ok]
+    monkeypatch.setattr(devcheck, "TIMED", (2, 16, 24))
+    assert [row.name for row in devcheck.bandwidth_rows(be)] == [case.name for case in benchmarks()]
+    assert benchmarks()[0].name == "copy"
 
 
 def test_a_problem_too_large_for_the_device_is_one_line_and_exit_2(monkeypatch, tmp_path, capsys):

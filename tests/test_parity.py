@@ -1,15 +1,14 @@
-"""OpenCL vs NumPy: every primitive, the forward model and a whole reconstruction.
+"""OpenCL vs NumPy: every primitive case (``clsdcam/backends/cases.py``), the forward model and a whole
+reconstruction.
 
 Runs on the device ``cl_devices.choose_device()`` picks (PYOPENCL_CTX names another; PoCL in CI, a GPU when
 one is lent; ``tests/test_portability.py`` runs this file on every installed OpenCL platform), on each code
 path the device runs (host and device on CPU devices; ``--cl-path`` keeps one) and every FFT engine of each;
 ``--cl-tiny`` keeps the problems tiny for interpreting devices (Oclgrind). Skipped cleanly when there is no
 OpenCL platform.
-Tolerances, relative to max|reference|: elementwise 1e-6, FFT-based 2e-6 + 5e-7·log10(N),
-reductions 1e-5.
+Tolerances, relative to max|reference|: the cases' rules (elementwise 1e-6, FFT-based 2e-6 + 5e-7·log10(N),
+reductions 1e-5).
 """
-import math
-
 import numpy as np
 import pytest
 from conftest import opencl_device
@@ -22,7 +21,11 @@ DEVICE = opencl_device()
 
 from clsdcam.backends import cl_devices  # noqa: E402
 from clsdcam.backends.base import HOST_CODE  # noqa: E402
+from clsdcam.backends.cases import (CASES, ELEMENTWISE, REDUCTION, Inputs, case_names, fft_tolerance,  # noqa: E402
+                                    relative_error)
 from clsdcam.backends.cl_host import MappedHostCode  # noqa: E402
+from clsdcam.backends.cl_kernel_code import KernelCode  # noqa: E402
+from clsdcam.backends.convolution import HostPathConvolution, PrimitiveConvolution  # noqa: E402
 from clsdcam.backends.fft import ReiknaFFT, available_engines  # noqa: E402
 from clsdcam.backends.opencl import OpenCLBackend  # noqa: E402
 
@@ -31,8 +34,7 @@ DTYPES = ["float32"] + (["float64"] if cl_devices.has_fp64(DEVICE) else [])
 # every FFT engine of each path: "host" is the host path (CPU devices), the others the device path
 PATH_ENGINES = {"host": available_engines("host"), "device": available_engines("device") + ["reikna-unpacked"]}
 PATH_BACKEND = {"host": "host", "device": "reikna"}      # the engine of a path's tests without FFTs
-K, FIELD, SENSOR, OFFSET = 3, (22, 30), (11, 15), (5, 7)
-ELEMENTWISE, REDUCTION = 1e-6, 1e-5
+K, FIELD, SENSOR = 3, (22, 30), (11, 15)      # the primitive cases' size (the sensor window at the centre)
 # reconstructions: (sensor, bands, iterations) of the simulated scene; --cl-tiny: 10 band-space iterations, then 2
 # in the subspace
 RECONSTRUCTION = {False: ((32, 48), 8, 50), True: ((12, 16), 4, 12)}
@@ -81,118 +83,29 @@ def new_backend(dtype, engine, kahan=None) -> OpenCLBackend:
     return backend
 
 
-def fft_tolerance(n: int) -> float:
-    return 2e-6 + 5e-7 * math.log10(n)
-
-
-def relative_error(got, ref) -> float:
-    got, ref = np.asarray(got, dtype=np.complex128), np.asarray(ref, dtype=np.complex128)
-    assert got.shape == ref.shape
-    scale = np.max(np.abs(ref)) or 1.0
-    return float(np.max(np.abs(got - ref)) / scale)
-
-
-def inputs(dtype, seed=0) -> dict:
-    """Random host arrays of odd, non-square shapes."""
-    rng = np.random.default_rng(seed)
-    real = lambda *shape: rng.standard_normal(shape).astype(dtype)  # noqa: E731
-    cdtype = np.result_type(dtype, np.complex64)
-    cplx = lambda *shape: (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(cdtype)  # noqa: E731
-    half = (FIELD[0], FIELD[1] // 2 + 1)
-    return {"field": real(K, *FIELD), "field2": real(K, *FIELD), "window": real(K, *SENSOR),
-            "filters": rng.random((K, *SENSOR)).astype(dtype), "sensor": real(*SENSOR),
-            "spectrum": cplx(K, *half), "transfer": cplx(*half), "mix": rng.standard_normal((K, K)),
-            "basis": np.linalg.qr(rng.standard_normal((5, K)))[0], "wide": real(5, *FIELD)}
-
-
-def run(be, case, a):
-    """Apply one primitive (by case name) on backend ``be`` to host inputs ``a``; host result."""
-    d = lambda name: be.to_device(a[name])  # noqa: E731
-    cases = {
-        "pad": lambda: be.pad(d("window"), FIELD, OFFSET),
-        "pad_2d": lambda: be.pad(d("sensor"), FIELD, OFFSET),
-        "crop": lambda: be.crop(d("field"), SENSOR, OFFSET),
-        "mask_sum": lambda: be.mask_sum(d("filters"), d("field"), OFFSET),
-        "mask_spread": lambda: be.mask_spread(d("filters"), d("sensor"), FIELD, OFFSET),
-        "cmul": lambda: be.cmul(be.to_device(a["spectrum"], True), be.to_device(a["transfer"], True)),
-        "cmul_conj": lambda: be.cmul(be.to_device(a["spectrum"], True), be.to_device(a["transfer"], True), conj=True),
-        "cmul_inplace": lambda: _inplace_cmul(be, a),
-        "copy": lambda: be.copy(d("field")),
-        "scale": lambda: be.scale(-0.37, d("field")),
-        "axpy": lambda: be.axpy(-0.37, d("field"), d("field2")),
-        "axpy_alias_x": lambda: _alias(be, a, lambda x, y: be.axpy(0.8, x, y, out=x)),
-        "axpy_alias_y": lambda: _alias(be, a, lambda x, y: be.axpy(0.8, x, y, out=y)),
-        "extrapolate": lambda: be.extrapolate(d("field"), d("field2"), 0.61),
-        "extrapolate_alias": lambda: _alias(be, a, lambda x, y: be.extrapolate(x, y, 0.61, out=y)),
-        "nonneg": lambda: be.nonneg(d("field")),
-        "soft": lambda: be.soft(d("field"), 0.4),
-        "haar_tv": lambda: be.haar_tv(d("field"), 0.05, (1.0, 1.0, 1.0)),
-        "haar_tv_weighted": lambda: be.haar_tv(d("field"), 0.3, (0.0, 0.5, 2.0)),
-        "haar_tv_bands_only": lambda: be.haar_tv(d("field"), 0.1, (1.0, 0.0, 0.0)),
-        "haar_tv_none": lambda: be.haar_tv(d("field"), 0.1, (0.0, 0.0, 0.0)),
-        "haar_tv_alias": lambda: _alias(be, a, lambda x, y: be.haar_tv(x, 0.05, (1.0, 2.0, 0.5), out=x)),
-        "haar_tv_nonneg": lambda: be.haar_tv(d("field"), 0.05, (1.0, 2.0, 0.5), nonneg=True),
-        "bandmix": lambda: be.bandmix(d("field"), a["mix"]),
-        "bandmix_expand": lambda: be.bandmix(d("field"), a["basis"]),
-        "bandmix_project": lambda: be.bandmix(d("wide"), a["basis"].T),
-        "subspace_tv": lambda: be.subspace_tv(d("field"), a["basis"], 0.05, (1.0, 1.0, 1.0)),
-        "subspace_tv_weighted": lambda: be.subspace_tv(d("field"), a["basis"], 0.2, (0.0, 0.5, 2.0)),
-        "fista_stats": lambda: np.array(be.fista_stats(d("field"), d("field2"), d("wide")[:K])),
-        "bandmix_alias": lambda: _alias(be, a, lambda x, y: be.bandmix(x, a["mix"], out=x)),
-        "vdot": lambda: be.vdot(d("field"), d("field2")),
-        "amax": lambda: be.amax(d("field")),
-        "l1_norm": lambda: be.l1_norm(d("field")),
-        "tv_norm": lambda: be.tv_norm(d("field"), (1.0, 0.5, 2.0)),
-        "tv_norm_xy": lambda: be.tv_norm(d("field"), (0.0, 1.0, 1.0)),
-        "gram": lambda: be.gram(d("field")),
-        "fft2": lambda: be.fft2(d("field")),
-        "ifft2": lambda: be.ifft2(be.to_device(a["spectrum"], True), FIELD),
-        "fft2_roundtrip": lambda: be.ifft2(be.fft2(d("field")), FIELD),
-    }
-    result = cases[case]()
-    return result if isinstance(result, (float, np.ndarray)) else be.to_host(result)
-
-
-def _alias(be, a, apply):
-    """Run ``apply(x, y)`` that writes into one of its inputs; return the written array."""
-    x, y = be.to_device(a["field"]), be.to_device(a["field2"])
-    return apply(x, y)
-
-
-def _inplace_cmul(be, a):
-    spectrum = be.to_device(a["spectrum"], True)
-    return be.cmul(spectrum, be.to_device(a["transfer"], True), out=spectrum)
-
-
-ELEMENTWISE_CASES = ["pad", "pad_2d", "crop", "mask_sum", "mask_spread", "cmul", "cmul_conj", "cmul_inplace",
-                     "copy", "scale", "axpy", "axpy_alias_x", "axpy_alias_y", "extrapolate", "extrapolate_alias",
-                     "nonneg", "soft", "haar_tv", "haar_tv_weighted", "haar_tv_bands_only", "haar_tv_none",
-                     "haar_tv_alias", "haar_tv_nonneg", "bandmix", "bandmix_alias", "bandmix_expand", "bandmix_project",
-                     "subspace_tv", "subspace_tv_weighted"]
-REDUCTION_CASES = ["vdot", "amax", "l1_norm", "tv_norm", "tv_norm_xy", "gram", "fista_stats"]
-FFT_CASES = ["fft2", "ifft2", "fft2_roundtrip"]
+def assert_case(case: str, dtype, backend, seed: int = 0, tolerance: float | None = None):
+    """One primitive case on ``backend`` against NumPy, within its rule (or ``tolerance``)."""
+    a = Inputs(K, SENSOR, FIELD, dtype, seed)
+    limit = CASES[case].tolerance(a) if tolerance is None else tolerance
+    assert CASES[case].error(backend, NumpyBackend(dtype), a) <= limit
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
-@pytest.mark.parametrize("case", ELEMENTWISE_CASES)
+@pytest.mark.parametrize("case", case_names("elementwise"))
 def test_elementwise(case, dtype, path):
-    a = inputs(dtype)
-    assert relative_error(run(opencl(dtype, PATH_BACKEND[path]), case, a), run(NumpyBackend(dtype), case, a)) <= ELEMENTWISE
+    assert_case(case, dtype, opencl(dtype, PATH_BACKEND[path]))
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
-@pytest.mark.parametrize("case", REDUCTION_CASES)
+@pytest.mark.parametrize("case", case_names("reduction"))
 def test_reduction(case, dtype, path):
-    a = inputs(dtype)
-    assert relative_error(run(opencl(dtype, PATH_BACKEND[path]), case, a), run(NumpyBackend(dtype), case, a)) <= REDUCTION
+    assert_case(case, dtype, opencl(dtype, PATH_BACKEND[path]))
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
-@pytest.mark.parametrize("case", FFT_CASES)
+@pytest.mark.parametrize("case", case_names("fft"))
 def test_fft(case, dtype, engine):
-    a = inputs(dtype)
-    error = relative_error(run(opencl(dtype, engine), case, a), run(NumpyBackend(dtype), case, a))
-    assert error <= fft_tolerance(FIELD[0] * FIELD[1])
+    assert_case(case, dtype, opencl(dtype, engine))
 
 
 @pytest.mark.parametrize("shape", [(2, 21, 31), (2, 43, 32), (5, 16, 9), (3, 21, 35), (1, 7, 6)])
@@ -280,7 +193,6 @@ def simulation(cl_tiny):
 
 def test_convolution_with_unseen_bands_and_fused_step(engine):
     """The model's convolution on OpenCL (mapped host pipeline or primitives) against NumPy's, bands 1 and 3 unseen."""
-    from clsdcam.convolution import filtered_convolution
     from clsdcam.geometry import support_geometry, transfer_function
 
     rng = np.random.default_rng(8)
@@ -290,7 +202,7 @@ def test_convolution_with_unseen_bands_and_fused_step(engine):
     ref_be, be = NumpyBackend("float32"), opencl("float32", engine)
     geometry = support_geometry(psf, ref_be.fast_length)
     transfer = transfer_function(psf, geometry)
-    ref, got = (filtered_convolution(b, transfer, filters, geometry.field) for b in (ref_be, be))
+    ref, got = (b.convolution(transfer, filters, geometry.field) for b in (ref_be, be))
     v, y = (rng.standard_normal((5, *geometry.field)).astype(np.float32) for _ in range(2))
     r = rng.standard_normal(SENSOR).astype(np.float32)
     tolerance = fft_tolerance(geometry.voxels_per_band)
@@ -305,15 +217,19 @@ def test_convolution_with_unseen_bands_and_fused_step(engine):
 
 
 def test_the_path_decides_which_code_runs():
-    """Host path: the HOST_CODE primitives are the mapped host code and the FFT is pocketfft; device path:
-    kernels and a device FFT; asking for the host path on a GPU, or an engine of the other path, is refused."""
+    """Host path: A and the HOST_CODE primitives are the mapped host code and the FFT is pocketfft; device path:
+    kernels, A from primitives and a device FFT; asking for the host path on a GPU, or an engine of the other path,
+    is refused."""
+    transfer, filters = np.ones((FIELD[0], FIELD[1] // 2 + 1), np.complex64), np.ones((K, *SENSOR), np.float32)
     device = opencl("float32", "reikna")
-    assert device.path == "device" and device.fft_engine == "reikna"
-    assert not any(isinstance(getattr(getattr(device, name), "__self__", None), MappedHostCode) for name in HOST_CODE)
+    assert device.path == "device" and device.fft_engine == "reikna" and isinstance(device.code, KernelCode)
+    assert isinstance(device.convolution(transfer, filters, FIELD), PrimitiveConvolution)
+    assert all(callable(getattr(device.code, name)) for name in HOST_CODE)
     if CPU:
         host = opencl("float32", "host")
-        assert host.path == "host" and host.fft_engine == "host"
-        assert all(isinstance(getattr(host, name).__self__, MappedHostCode) for name in HOST_CODE)
+        assert host.path == "host" and host.fft_engine == "host" and isinstance(host.code, MappedHostCode)
+        assert isinstance(host.convolution(transfer, filters, FIELD), HostPathConvolution)
+        assert all(callable(getattr(host.code, name)) for name in HOST_CODE)
         with pytest.raises(InputError, match="not an engine of the host path"):
             OpenCLBackend("float32", device=DEVICE, fft="reikna", path="host")
     with pytest.raises(InputError, match="not an engine of the device path"):
@@ -324,15 +240,13 @@ def test_the_path_decides_which_code_runs():
 # order than BLAS's
 HOST_PATH_CASES = {"subspace_tv": 10 * ELEMENTWISE, "subspace_tv_weighted": 10 * ELEMENTWISE,
                    "bandmix": 10 * ELEMENTWISE, "bandmix_alias": 10 * ELEMENTWISE, "bandmix_expand": 10 * ELEMENTWISE,
-                   "bandmix_project": 10 * ELEMENTWISE, "gram": REDUCTION, "tv_norm": REDUCTION,
-                   "tv_norm_xy": REDUCTION}
+                   "bandmix_project": 10 * ELEMENTWISE, "bandmix_projector": 10 * ELEMENTWISE, "gram": REDUCTION,
+                   "tv_norm": REDUCTION, "tv_norm_xy": REDUCTION}
 
 
 @pytest.mark.parametrize("case", HOST_PATH_CASES)
 def test_host_code_primitives_on_both_paths(case, path):
-    a = inputs("float32", seed=4)
-    got = run(opencl("float32", PATH_BACKEND[path]), case, a)
-    assert relative_error(got, run(NumpyBackend("float32"), case, a)) <= HOST_PATH_CASES[case]
+    assert_case(case, "float32", opencl("float32", PATH_BACKEND[path]), seed=4, tolerance=HOST_PATH_CASES[case])
 
 
 def test_host_memory_of_a_dropped_buffer_is_kept_until_its_queued_work_is_done():

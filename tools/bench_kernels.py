@@ -4,9 +4,11 @@
     python tools/bench_kernels.py [--size 320x448] [--bands 64] [--repeat 5] [--path auto] [--engine auto]
                                   [--dtype float32] [--device SUBSTRING] [--no-numpy] [--json PATH]
 
-The problem is the sensor H×W with the paper's 2H×2W field and K bands. Each row is the
-median of N timed runs after one warm-up, with queue.finish() before and after the timed
-part; "GB/s" is the minimum bytes read + written by the primitive divided by that time.
+The problem is the sensor H×W with the paper's 2H×2W field and K bands. The primitives' rows are their
+benchmark cases in ``clsdcam/backends/cases.py`` (the table the parity tests and ``clsdcam check`` read), their
+arrays moved to the backend once and their output reused. Each row is the median of N timed runs after one
+warm-up, with queue.finish() before and after the timed part; "GB/s" is the minimum bytes read + written by the
+primitive (the case's ``moved``) divided by that time.
 The roofs, measured in the same run on one field cube: the host's STREAM-style copy (NumPy, one
 slice per core) and the device's own buffer-to-buffer ``enqueue_copy``, each 2·bytes/time; "% roof" is a
 row's GB/s as a fraction of the device's copy (NumPy's rows: of the host's).
@@ -25,19 +27,16 @@ import platform
 import statistics
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from clsdcam.backends.cases import Inputs, benchmarks  # noqa: E402
 from clsdcam.backends.numpy import NumpyBackend  # noqa: E402
-from clsdcam.fista import Fista  # noqa: E402
-from clsdcam.geometry import transfer_function  # noqa: E402
 from clsdcam.model import ForwardModel  # noqa: E402
-from clsdcam.priors import ProxAverage, TotalVariation  # noqa: E402
-from clsdcam.problem import Problem  # noqa: E402
-from clsdcam.settings import Settings  # noqa: E402
 
 
 def parse_args(argv=None):
@@ -55,75 +54,58 @@ def parse_args(argv=None):
     return parser.parse_args(argv)
 
 
-class Case:
-    """Host data and per-backend device buffers for one geometry."""
+class Bench:
+    """The primitive cases' inputs at one size (``cases.Inputs``: the sensor at the centre of a 2H × 2W field) and a
+    PSF for the model's rows."""
 
     def __init__(self, sensor, bands: int, dtype):
-        rng = np.random.default_rng(0)
-        self.sensor, self.bands = sensor, bands
-        self.field = (2 * sensor[0], 2 * sensor[1])
-        self.psf = rng.random(sensor)
-        self.filters = rng.random((bands, *sensor))
-        self.cube = rng.random((bands, *self.field)).astype(dtype)
-        self.item = np.dtype(dtype).itemsize
+        self.sensor, self.bands = tuple(sensor), bands
+        self.field = (2 * self.sensor[0], 2 * self.sensor[1])
+        self.inputs = Inputs(bands, self.sensor, self.field, dtype)
+        self.psf = np.random.default_rng(0).random(self.sensor)
+        self.cube = self.inputs["field"]
 
-    def sizes(self) -> dict:
-        """Bytes of one field cube, spectrum, filter stack and sensor image."""
-        k, (h, w), (hp, wp) = self.bands, self.sensor, self.field
-        return {"F": k * hp * wp * self.item, "S": k * hp * (wp // 2 + 1) * 2 * self.item,
-                "f": k * h * w * self.item, "s": h * w * self.item}
+    def field_bytes(self) -> int:
+        return self.inputs.nbytes("field")
 
 
-def rows(be, p: Case) -> dict:
-    """name -> (callable running the primitive once on ``be``, bytes moved)."""
-    n = p.sizes()
-    model = ForwardModel(be, p.psf, p.filters)
-    x, y, out = be.to_device(p.cube), be.to_device(p.cube[::-1].copy()), be.empty(model.cube_shape)
-    spectrum = be.fft2(x)
-    transfer = be.to_device(transfer_function(p.psf, model.geometry), complex_=True)
-    filters = be.to_device(p.filters)
-    window = be.to_device(p.cube[:, :p.sensor[0], :p.sensor[1]])
-    b, r = be.empty(p.sensor), be.to_device(np.ones(p.sensor))
-    mix = np.eye(p.bands) * 0.5 + 0.5 / p.bands
-    basis = np.linalg.qr(np.random.default_rng(1).standard_normal((p.bands, 3)))[0]
-    coefficients, projected = be.to_device(p.cube[:3]), be.empty((3,) + p.field)
-    offset = model.offset
-    step = iteration(be, model, p)
-    return {
-        "fft2": (lambda: be.fft2(x, out=spectrum), n["F"] + n["S"]),
-        "ifft2": (lambda: be.ifft2(spectrum, p.field, out=out), n["S"] + n["F"]),
-        "cmul": (lambda: be.cmul(spectrum, transfer, out=spectrum), 2 * n["S"]),
-        "pad": (lambda: be.pad(window, p.field, offset, out=out), n["f"] + n["F"]),
-        "crop": (lambda: be.crop(x, p.sensor, offset, out=window), 2 * n["f"]),
-        "mask_sum": (lambda: be.mask_sum(filters, x, offset, out=b), 2 * n["f"] + n["s"]),
-        "mask_spread": (lambda: be.mask_spread(filters, r, p.field, offset, out=out), n["f"] + n["s"] + n["F"]),
-        "scale": (lambda: be.scale(0.5, x, out=out), 2 * n["F"]),
-        "axpy": (lambda: be.axpy(-0.1, x, y, out=out), 3 * n["F"]),
-        "extrapolate": (lambda: be.extrapolate(x, y, 0.3, out=out), 3 * n["F"]),
-        "nonneg": (lambda: be.nonneg(x, out=out), 2 * n["F"]),
-        "soft": (lambda: be.soft(x, 0.1, out=out), 2 * n["F"]),
-        "haar_tv": (lambda: be.haar_tv(x, 1e-3, (1.0, 1.0, 1.0), out=out, nonneg=True), 2 * n["F"]),
-        "subspace_tv": (lambda: be.subspace_tv(coefficients, basis, 1e-3, (1.0, 1.0, 1.0), out=projected),
-                        2 * 3 * n["F"] // p.bands),
-        "fista_stats": (lambda: be.fista_stats(x, y, out), 3 * n["F"]),
-        "vdot": (lambda: be.vdot(x, y), 2 * n["F"]),
-        "amax": (lambda: be.amax(x), n["F"]),
-        "l1_norm": (lambda: be.l1_norm(x), n["F"]),
-        "tv_norm": (lambda: be.tv_norm(x, (1.0, 1.0, 1.0)), n["F"]),
-        "gram": (lambda: be.gram(x), n["F"]),
-        "bandmix": (lambda: be.bandmix(x, mix, out=out), 2 * n["F"]),
-        "forward": (lambda: model.forward(x, out=b), 0),
-        "adjoint_step": (lambda: model.adjoint(r, out=out, y=y, step=0.1), 0),
-        "iteration": (step, 0),
-    }
+MODEL_ROWS = ("forward", "adjoint_step", "iteration")
 
 
-def iteration(be, model, p: Case):
-    """One step of the solver's FISTA loop on its band-space problem (TV prox, no objective checks)."""
+def rows(be, p: Bench) -> dict:
+    """name -> (a function making the row's run-once callable on ``be``, bytes moved; 0: not counted): each
+    primitive's benchmark case, then the model's rows."""
+    made = {case.name: (partial(case.timed, be, p.inputs), case.moved(p.inputs)) for case in benchmarks()}
+    return {**made, **{name: (partial(model_row, be, p, name), 0) for name in MODEL_ROWS}}
+
+
+def model_row(be, p: Bench, name: str):
+    """The run-once callable of a model row: A ("forward"), the fused gradient step y − s·Aᵀr ("adjoint_step") or
+    one FISTA iteration."""
+    model = ForwardModel(be, p.psf, p.inputs["filters"])
+    if name == "iteration":
+        return iteration(be, model, p)
+    x, r = be.to_device(p.cube), be.to_device(np.ones(p.sensor))
+    if name == "forward":
+        b = be.empty(p.sensor)
+        return lambda: model.forward(x, out=b)
+    y, out = be.to_device(p.cube[::-1].copy()), be.empty(model.cube_shape)
+    return lambda: model.adjoint(r, out=out, y=y, step=0.1)
+
+
+def iteration(be, model, p: Bench):
+    """One iteration of the solver's loop (the driver running FISTA) on its band-space problem (TV prox, no
+    objective checks)."""
+    from clsdcam.algorithms.fista import Fista
+    from clsdcam.driver import Driver, Rules
+    from clsdcam.priors import ProxAverage, TotalVariation
+    from clsdcam.problem import Problem
+    from clsdcam.settings import Settings
+
     average = ProxAverage(be, [TotalVariation(be, 1e-3, Settings())], model.cube_shape)
     problem = Problem(model, be.to_device(np.ones(p.sensor)), average.prox, average.value, p.bands)
-    loop = Fista(be, be.to_device(p.cube * 0.01), step=1e-3)
-    return lambda: loop.run(problem.gradient_step, problem.prox, 1)
+    driver = Driver(Fista(be, be.to_device(p.cube * 0.01), 1e-3, Rules()))
+    return lambda: driver.run(problem, 1)
 
 
 def median_seconds(run, finish, repeat: int) -> float:
@@ -160,13 +142,13 @@ def device_copy_gbps(be, nbytes: int, repeat: int) -> float:
     return 2 * src.nbytes / median_seconds(lambda: be.copy(src, out=dst), be.queue.finish, repeat) / 1e9
 
 
-def bench(be, p: Case, repeat: int, only) -> dict:
+def bench(be, p: Bench, repeat: int, only) -> dict:
     finish = be.queue.finish if hasattr(be, "queue") else (lambda: None)
     results = {}
-    for name, (run, nbytes) in rows(be, p).items():
+    for name, (make, nbytes) in rows(be, p).items():
         if only and name not in only:
             continue
-        seconds = median_seconds(run, finish, repeat)
+        seconds = median_seconds(make(), finish, repeat)
         results[name] = {"ms": seconds * 1e3, "GBps": nbytes / seconds / 1e9 if nbytes else None}
         print(f"  {be.name:6s} {name:12s} {seconds * 1e3:9.2f} ms", file=sys.stderr, flush=True)
     return results
@@ -217,10 +199,10 @@ def main(argv=None) -> int:
     from clsdcam.backends.opencl import OpenCLBackend
 
     sensor = tuple(int(v) for v in args.size.lower().split("x"))
-    problem = Case(sensor, args.bands, np.dtype(args.dtype))
+    problem = Bench(sensor, args.bands, np.dtype(args.dtype))
     only = set(args.only.split(",")) if args.only else None
     be = OpenCLBackend(args.dtype, device=args.device, fft=args.engine, path=args.path)
-    cube = problem.sizes()["F"]
+    cube = problem.field_bytes()
     meta = {**environment(be), "problem": f"sensor {sensor[0]}x{sensor[1]}, field {problem.field[0]}x{problem.field[1]}, "
                                          f"{args.bands} bands, {args.dtype}", "repeat": args.repeat,
             "roof_GBps": {"device_copy": device_copy_gbps(be, cube, args.repeat),

@@ -1,4 +1,5 @@
-"""Backends: the primitives of the contract in ``base.py``, on NumPy (reference) and OpenCL, chosen by name.
+"""Backends: the contract of ``base.py`` (Math, Platform, optional Fusions), on NumPy (reference) and OpenCL, chosen
+by name.
 
 The bottom layer: modules here import nothing of clsdcam's but ``errors`` and each other. The OpenCL
 backend is imported only when asked for, so ``import clsdcam`` and the NumPy backend work on machines

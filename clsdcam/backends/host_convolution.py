@@ -1,6 +1,6 @@
 """A's filtered convolution on the host: bands in cache-sized chunks through pocketfft, pruned transforms.
 
-The operator of :mod:`clsdcam.convolution` (which picks this pipeline on the host path):
+The operator of ``convolution.py`` (backends return it on the host path):
 
     forward:   b = Σ_k F_k ⊙ [irfft2(Ĥ · rfft2(v_k))]_{0:H, 0:W}
     adjoint:   (Aᵀr)_k = irfft2(conj(Ĥ) · rfft2(pad₀(F_k ⊙ r)))

@@ -1,8 +1,9 @@
 """The NumPy/SciPy reference primitives: readable first, every OpenCL kernel is checked against them.
 
-The contract (what each primitive computes, layouts, ``out=``) is ``base.Backend``'s; the docstrings
-here say only how NumPy computes it. Always the host path: the heavy primitives run cache-blocked on
-row blocks over a few threads (``host_tv``, ``blocks``), BLAS (``host_linalg``) and pocketfft.
+The contract (what each primitive computes, layouts, ``out=``) is ``base.py``'s (``Math``, ``Platform`` and the
+optional ``Fusions``, all kept here); the docstrings here say only how NumPy computes it. Always the host path:
+the heavy primitives run cache-blocked on row blocks over a few threads (``host_tv``, ``blocks``), BLAS
+(``host_linalg``) and pocketfft; A is the chunked pocketfft pipeline (``convolution.host_path``).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import scipy.fft
 from ..errors import InputError
 from . import host_linalg
 from .blocks import map_blocks, scratch_buffer
+from .convolution import host_path
 from .host_tv import haar_block, haar_limits, halo, subspace_tv_blocks, tv_norm_blocks
 
 VDOT_ROW = 8192   # products per float32 partial sum in vdot
@@ -86,6 +88,10 @@ class NumpyBackend:
 
     def ifft2(self, spectrum, shape, out=None):
         return _result(out, scipy.fft.irfft2(spectrum, s=shape, workers=self.workers))
+
+    def convolution(self, transfer, filters, field_shape, skip_unseen: bool = True):
+        """The host path's: the chunked pocketfft pipeline on the arrays themselves."""
+        return host_path(self, transfer, filters, field_shape, skip_unseen)
 
     def cmul(self, spectrum, transfer, conj: bool = False, out=None):
         factor = np.conj(transfer) if conj else transfer

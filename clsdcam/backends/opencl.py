@@ -1,17 +1,18 @@
-"""The OpenCL backend: the primitives of the contract in ``base.py`` on ``pyopencl.array.Array`` buffers.
+"""The OpenCL backend: the contract of ``base.py`` (Math, Platform, Fusions) on ``pyopencl.array.Array`` buffers.
 
 Kernels live in ``kernels/*.cl`` (one program per context and dtype, built once); FFTs go through
-:mod:`clsdcam.backends.fft`. Which code runs the heavy primitives is the path's (``base.py``): on the
-host path (CPU devices) the FFT pipeline and the ``HOST_CODE`` primitives run host code on mapped
-buffers (``cl_host``), bound in place of the kernel versions below; on the device path everything is a
-kernel. Launches are asynchronous on one in-order queue; data crosses to the host only in ``to_host``,
-in host views and in the scalar reductions (``vdot``, ``amax``, norms, ``gram``).
+:mod:`clsdcam.backends.fft`. Which code runs the heavy primitives is the path's (``base.py``), resolved once in
+the constructor, which picks the path's code object (:data:`PATH_CODE`): on the host path (CPU devices) A and
+the ``HOST_CODE`` primitives run host code on mapped buffers (``cl_host.MappedHostCode``), on the device path
+kernels (``cl_kernel_code.KernelCode``); the backend's methods of those names call it. Everything else is a
+kernel on both paths. Launches are asynchronous on one in-order queue; data crosses to the host only in
+``to_host``, in host views and in the scalar reductions (``vdot``, ``amax``, norms, ``gram``).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .base import HOST_CODE, resolve_path
+from .base import resolve_path
 from .cl_devices import (check_memory, check_problem, choose_device, context_queue, describe, import_pyopencl, is_cpu,
                          require_dtype)
 from .numpy import COMPLEX_OF, real_dtype
@@ -21,17 +22,15 @@ try:
     import pyopencl.array as cla
 
     from .cl_host import MappedHostCode
+    from .cl_kernel_code import KernelCode
     from .cl_memory import HostBuffers, mapped
-    from .cl_program import Kernels
+    from .cl_program import Kernels, ints, total
     from .fft import make_fft
+    PATH_CODE = {"host": MappedHostCode, "device": KernelCode}     # a path's code for A and the HOST_CODE primitives
     _IMPORT_ERROR = None
 except ImportError as _exc:  # no pyopencl: the constructor says how to install a driver
-    cl = cla = None
+    cl = cla = PATH_CODE = None
     _IMPORT_ERROR = _exc
-
-GRAM_PIXELS = 64      # pixels per gram work item (at least)
-GRAM_GROUPS = 4       # gram work-groups per compute unit (at most), each for every (i, j)
-BANDMIX_ROWS = 8      # output bands per bandmix work item (as in bandmix.cl)
 
 
 class OpenCLBackend:
@@ -51,17 +50,13 @@ class OpenCLBackend:
         self.device_name = describe(self.device)
         self.context, self.queue = context_queue(self.device)
         cpu = is_cpu(self.device)
-        self.path = resolve_path(path, cpu)
+        self.path = resolve_path(path, cpu)           # the host/device choice, made here once
         self.kernels = Kernels(self.queue, self.dtype, kahan)
         self.allocator = HostBuffers(self.queue) if cpu else None
         self.fft = make_fft(self.queue, self.path, fft, self.dtype, self.kernels)
         self.fft_engine = self.fft.name
         self.workers = getattr(self.fft, "workers", 1)
-        self._band_cubes = None            # (shape, expanded, stepped) of the subspace_tv kernels
-        if self.path == "host":
-            host_code = MappedHostCode(self)
-            for name in HOST_CODE:
-                setattr(self, name, getattr(host_code, name))
+        self.code = PATH_CODE[self.path](self)        # the path's A and HOST_CODE primitives
 
     # ---- memory -------------------------------------------------------------------------
     def to_device(self, host, complex_: bool = False):
@@ -69,7 +64,7 @@ class OpenCLBackend:
         return cla.to_device(self.queue, array, allocator=self.allocator)
 
     def to_host(self, array) -> np.ndarray:
-        return self._drained(array.get(queue=self.queue))
+        return self.drained(array.get(queue=self.queue))
 
     def empty(self, shape, complex_: bool = False):
         return cla.empty(self.queue, tuple(shape), self.cdtype if complex_ else self.dtype, allocator=self.allocator)
@@ -113,6 +108,10 @@ class OpenCLBackend:
         self.fft.inverse(_stack(spectrum), _stack(out))
         return out
 
+    def convolution(self, transfer, filters, field_shape, skip_unseen: bool = True):
+        """The path's (``base.Math.convolution``): the host pipeline on mapped buffers, or kernels."""
+        return self.code.convolution(transfer, filters, field_shape, skip_unseen)
+
     def cmul(self, spectrum, transfer, conj: bool = False, out=None):
         out = self._out(out, spectrum.shape, self.cdtype)
         plane = transfer.size
@@ -123,26 +122,26 @@ class OpenCLBackend:
     # ---- geometry -----------------------------------------------------------------------
     def pad(self, x, field_shape, offset, out=None):
         out = self._out(out, x.shape[:-2] + tuple(field_shape), x.dtype)
-        self.kernels.grid3("pad", _planes(out), out, x, *_ints(*x.shape[-2:], *field_shape, *offset))
+        self.kernels.grid3("pad", _planes(out), out, x, *ints(*x.shape[-2:], *field_shape, *offset))
         return out
 
     def crop(self, x, shape, offset, out=None):
         out = self._out(out, x.shape[:-2] + tuple(shape), x.dtype)
-        self.kernels.grid3("crop", _planes(out), out, x, *_ints(*shape, *x.shape[-2:], *offset))
+        self.kernels.grid3("crop", _planes(out), out, x, *ints(*shape, *x.shape[-2:], *offset))
         return out
 
     def mask_sum(self, filters, field, offset, out=None):
         k, h, w = filters.shape
         out = self._out(out, (h, w), self.dtype)
         self.kernels.grid3("mask_sum", (1, h, w), out, filters, field,
-                           *_ints(k, h, w, *field.shape[-2:], *offset))
+                           *ints(k, h, w, *field.shape[-2:], *offset))
         return out
 
     def mask_spread(self, filters, r, field_shape, offset, out=None):
         """In one pass over the field (the padding written as zeros by the same kernel)."""
         k, h, w = filters.shape
         out = self._out(out, (k,) + tuple(field_shape), self.dtype)
-        self.kernels.grid3("mask_spread", out.shape, out, filters, r, *_ints(k, h, w, *field_shape, *offset))
+        self.kernels.grid3("mask_spread", out.shape, out, filters, r, *ints(k, h, w, *field_shape, *offset))
         return out
 
     # ---- vectors ------------------------------------------------------------------------
@@ -157,10 +156,10 @@ class OpenCLBackend:
 
     def vdot(self, x, y) -> float:
         """Per-group partial sums in float64 (Kahan float32 without fp64), finished on the host."""
-        return self._drained(_total(self.kernels.reduce("vdot", x.size, x, y)))
+        return self.drained(total(self.kernels.reduce("vdot", x.size, x, y)))
 
     def amax(self, x) -> float:
-        return self._drained(float(self.kernels.reduce("amax", x.size, x).max())) if x.size else 0.0
+        return self.drained(float(self.kernels.reduce("amax", x.size, x).max())) if x.size else 0.0
 
     def nonneg(self, x, out=None):
         return self._map("nonneg", x, out, x)
@@ -169,61 +168,34 @@ class OpenCLBackend:
         return self._map("soft", x, out, x, self._real(t))
 
     def l1_norm(self, x) -> float:
-        return self._drained(_total(self.kernels.reduce("l1", x.size, x)))
+        return self.drained(total(self.kernels.reduce("l1", x.size, x)))
 
     def fista_stats(self, x_new, x_old, y) -> tuple[float, float, float]:
         """One pass: differences in REAL, products in ACC."""
         partials = self.kernels.reduce("fista_stats", x_new.size, x_new, x_old, y, outputs=3)
-        return self._drained(tuple(_total(row) for row in partials))
+        return self.drained(tuple(total(row) for row in partials))
 
     # ---- priors -------------------------------------------------------------------------
     def haar_tv(self, x, tau, weights, out=None, nonneg: bool = False):
-        """One kernel, one pass (clip bounds c_d = 2·D·τ·w_d, see ``base.Backend.haar_tv``)."""
+        """One kernel, one pass (clip bounds c_d = 2·D·τ·w_d, see ``base.Math.haar_tv``)."""
         k, h, w = x.shape
         limits, mask, scale = self._haar_constants(tau, weights)
         target = self.target(out, x.shape, x)
-        self.kernels.grid3("haar_tv", x.shape, target, x, *_ints(k, h, w), mask, *limits, scale, np.int32(bool(nonneg)))
+        self.kernels.grid3("haar_tv", x.shape, target, x, *ints(k, h, w), mask, *limits, scale, np.int32(bool(nonneg)))
         return self.deliver(target, out)
 
+    # ---- the path's code (``self.code``: host code on mapped buffers, or kernels) -------------
     def tv_norm(self, x, weights) -> float:
-        """Row-wise partial sums in ACC (the host path binds ``cl_host``'s instead)."""
-        acc = self.kernels.acc.type
-        w = [acc(wd if wd > 0 else 0.0) for wd in weights]
-        return self._drained(_total(self.kernels.reduce("tv_norm", x.shape[0] * x.shape[1], x, *_ints(*x.shape), *w)))
+        return self.code.tv_norm(x, weights)
 
     def gram(self, x) -> np.ndarray:
-        """Work item (t, i, j) sums x_i·x_j over pixels t, t + T, … (j ≥ i) in ACC, its group adds them; the host adds
-        the groups' partials."""
-        k, pixels = x.shape[0], x.size // x.shape[0]
-        local = self.kernels.local_1d
-        groups = max(1, min(-(-pixels // (GRAM_PIXELS * local)), GRAM_GROUPS * self.device.max_compute_units))
-        partial = cla.empty(self.queue, (groups, k, k), self.kernels.acc)
-        partial.fill(0, queue=self.queue)
-        scratch = cl.LocalMemory(local * self.kernels.acc.itemsize)
-        self.kernels.launch("gram", (groups * local, k, k), (local, 1, 1), partial, scratch, x, np.int32(k),
-                            np.int64(pixels))
-        upper = np.triu(self.to_host(partial).sum(axis=0, dtype=np.float64))
-        return upper + np.triu(upper, 1).T
+        return self.code.gram(x)
 
     def bandmix(self, x, matrix, out=None):
-        """One work item per pixel and BANDMIX_ROWS output bands."""
-        rows, cols = np.shape(matrix)
-        target = self.target(out, (rows,) + x.shape[1:], x)
-        pixels = x.size // x.shape[0]
-        m = cla.to_device(self.queue, np.ascontiguousarray(matrix, dtype=self.dtype), allocator=self.allocator)
-        self.kernels.grid2("bandmix", pixels, -(-rows // BANDMIX_ROWS), target, x, m, np.int32(rows), np.int32(cols),
-                           np.int64(pixels))
-        return self.deliver(target, out)
+        return self.code.bandmix(x, matrix, out)
 
     def subspace_tv(self, c, basis, tau, weights, out=None):
-        """Expand, the fused haar_tv with max(·, 0), project, through two band cubes kept for the last shape."""
-        shape = (basis.shape[0],) + tuple(c.shape[1:])
-        if self._band_cubes is None or self._band_cubes[0] != shape:
-            self._band_cubes = (shape, self.empty(shape), self.empty(shape))
-        _, expanded, stepped = self._band_cubes
-        self.bandmix(c, basis, out=expanded)
-        self.haar_tv(expanded, tau, weights, out=stepped, nonneg=True)
-        return self.bandmix(stepped, np.transpose(basis), out=out)
+        return self.code.subspace_tv(c, basis, tau, weights, out)
 
     # ---- helpers ------------------------------------------------------------------------
     def target(self, out, shape, source):
@@ -251,7 +223,7 @@ class OpenCLBackend:
         self.kernels.grid1(name, like.size, out, *args, np.int64(like.size))
         return out
 
-    def _drained(self, value):
+    def drained(self, value):
         """``value`` came from a blocking read: the queue has finished what came before; retired host memory
         can go."""
         if self.allocator is not None:
@@ -270,10 +242,6 @@ class OpenCLBackend:
         return self.dtype.type(value)
 
 
-def _ints(*values) -> list:
-    return [np.int32(v) for v in values]
-
-
 def _planes(x) -> tuple[int, int, int]:
     """(B, H, W) of an array whose leading axes are flattened into B."""
     return (int(np.prod(x.shape[:-2], dtype=np.int64)),) + tuple(x.shape[-2:])
@@ -282,7 +250,3 @@ def _planes(x) -> tuple[int, int, int]:
 def _stack(x):
     """x viewed as (B, H, W) (same buffer)."""
     return x if x.ndim == 3 else x.reshape(_planes(x))
-
-
-def _total(partials: np.ndarray) -> float:
-    return float(np.sum(partials, dtype=np.float64))

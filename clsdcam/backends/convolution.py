@@ -1,4 +1,4 @@
-"""The filtered convolution at the heart of A, built in the model layer from the backend's primitives.
+"""A's filtered convolution, the operator each backend's ``convolution`` returns (``base.Convolution``).
 
 With Ĥ the transfer function with the sensor window at the FFT origin
 (:func:`clsdcam.geometry.transfer_function`), F_k the filters and (H, W) the sensor:
@@ -7,12 +7,12 @@ With Ĥ the transfer function with the sensor window at the FFT origin
     adjoint:   (Aᵀr)_k = irfft2(conj(Ĥ) · rfft2(pad₀(F_k ⊙ r)))
     gradient step (fused):  z = y − s·Aᵀr
 
-Two implementations of one operator, chosen by the backend's path (``backends/base.py``):
+Two implementations of one operator, one per path (``base.py``):
 
-* host path: :class:`HostPathConvolution`, the band-chunked, pruned pocketfft pipeline
-  (``backends/host_convolution.py``) on the backend's host views (NumPy arrays as they are, an
-  OpenCL CPU device's buffers mapped);
-* device path: :class:`PrimitiveConvolution`, whole cubes primitive by primitive
+* host path: :class:`HostPathConvolution` (:func:`host_path`), the band-chunked, pruned pocketfft pipeline
+  (``host_convolution.py``) on the backend's host views (NumPy arrays as they are, an OpenCL CPU device's
+  buffers mapped);
+* device path: :class:`PrimitiveConvolution` (:func:`device_path`), whole cubes primitive by primitive
   (fft2 → cmul → ifft2 → mask_sum, and back), every step a kernel.
 
 Both have ``forward``, ``adjoint``, ``with_filters`` (the same geometry and transfer with other filters:
@@ -22,16 +22,20 @@ from __future__ import annotations
 
 from contextlib import ExitStack
 
-from .backends.host_convolution import HostConvolution
+from .host_convolution import HostConvolution
 
 ORIGIN = (0, 0)
 
 
-def filtered_convolution(backend, transfer, filters, field_shape, skip_unseen: bool = True):
-    """The convolution of ``backend``'s path (``skip_unseen``: no FFTs for bands no filter sees, host path)."""
-    if backend.path == "host":
-        return HostPathConvolution(backend, HostConvolution(transfer, filters, field_shape, backend.dtype,
-                                                            backend.workers, skip_unseen))
+def host_path(backend, transfer, filters, field_shape, skip_unseen: bool = True) -> "HostPathConvolution":
+    """The host path's convolution on ``backend``'s host views (``skip_unseen``: no FFTs for bands no filter sees)."""
+    return HostPathConvolution(backend, HostConvolution(transfer, filters, field_shape, backend.dtype,
+                                                        backend.workers, skip_unseen))
+
+
+def device_path(backend, transfer, filters, field_shape, skip_unseen: bool = True) -> "PrimitiveConvolution":
+    """The device path's convolution from ``backend``'s primitives (every band transformed: ``skip_unseen`` is the
+    host pipeline's)."""
     return PrimitiveConvolution(backend, transfer, filters, field_shape)
 
 
