@@ -5,9 +5,9 @@
   so the recorded objective never increases;
 * step back-off: a non-finite value, a data term f above 10³·F(best), or a checkpoint right after a rollback
   that does not lower F beyond round-off halves the step before going back to the best iterate. From the best
-  point with t = 1, a step ≤ 1/L lowers F; when it does not, the step is too long for where the solve is (with
-  the averaged TV prox, FISTA stalls at a level set by its step, and float32 and float64 would otherwise part
-  there: one sees a rise where the other sees round-off).
+  point with the momentum reset, a proximal-gradient step ≤ 1/L lowers F; when it does not, the step is too long
+  for where the solve is (with the averaged TV prox, FISTA stalls at a level set by its step, and float32 and
+  float64 would otherwise part there: one sees a rise where the other sees round-off).
 
 Without an objective there are no checkpoints and no back-off on rises.
 """

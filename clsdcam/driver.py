@@ -39,11 +39,11 @@ class Driver:
     checkpoints) for the space it starts in."""
 
     def __init__(self, algorithm, rules: Rules = Rules(), objective: Callable[[Any], float] | None = None):
+        self._start = time.perf_counter()
         self.algorithm = algorithm
         self.rules = rules
         self.history: list[dict] = []
         self.checkpoints = Checkpoints(algorithm, objective, algorithm.backend.dtype)
-        self._start = time.perf_counter()
 
     @property
     def x(self):
@@ -87,9 +87,8 @@ class Driver:
 
     def _iteration(self, problem, last: bool) -> dict:
         k = self.iterations + 1
-        step = self.algorithm.step
         numbers = self.algorithm.iterate(problem)
-        record = self.checkpoints.guard({**numbers, "step": step, "rollback": False, "backoff": False})
+        record = self.checkpoints.guard({**numbers, "step": self.algorithm.step, "rollback": False, "backoff": False})
         record["iteration"] = k
         if self.checkpoints.active and (k % self.rules.objective_every == 0 or k == 1 or last):
             record.update(self.checkpoints.check())

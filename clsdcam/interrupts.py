@@ -1,6 +1,6 @@
 """Ctrl-C held back while the solver's state is between two consistent points.
 
-FISTA turns a Ctrl-C inside its loop into the stop reason "interrupted" (the best iterate kept).
+The driver turns a Ctrl-C inside its loop into the stop reason "interrupted" (the best iterate kept).
 Between its runs the solver may be moving the iterates to another space (onto a spectral basis,
 or back to the bands); a KeyboardInterrupt there would leave them half moved. Inside
 ``held_interrupt()`` a SIGINT is only recorded, and raised as KeyboardInterrupt when the block ends.

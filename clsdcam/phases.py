@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import space_policy as policy
 from .interrupts import held_interrupt
 from .problem import Problem
 from .skips import subspace_line
-from .space_policy import (CHECK_EVERY, SETTLE_EVERY, WARMUP, Enter, Leave, Move, Stay, has_settled, on_check,
-                           on_entry, read, subspace_allowed)
+from .space_policy import Enter, Leave, Move, Stay, has_settled, on_check, on_entry, read, subspace_allowed
 from .spaces import Spaces
 from .tracker import Tracker
 
@@ -54,27 +54,27 @@ class Phases:
                 return reason
             if driver.iterations < iters:
                 with held_interrupt():
-                    self._enter_subspace(self.problem)
+                    self._enter_subspace()
         while driver.iterations < iters:
             left = iters - driver.iterations
             checking = self.problem.subspace is not None
-            reason = self._run(min(CHECK_EVERY, left) if checking else left)
+            reason = self._run(min(policy.CHECK_EVERY, left) if checking else left)
             if reason:
                 return reason
             if checking and driver.iterations < iters:
                 with held_interrupt():
-                    self._check_width(self.problem)
+                    self._check_width()
         return "iterations"
 
     def _warm_up(self) -> str | None:
         """Band space for WARMUP iterations, then until consecutive bases settle; a stop reason or None."""
         driver, iters = self.driver, self.iters
-        reason = self._run(min(WARMUP, iters))
+        reason = self._run(min(policy.WARMUP, iters))
         if self.rank:            # the user chose the basis's size: no waiting for the spectra
             return reason
         previous = self._read().basis
         while not reason and driver.iterations < iters:
-            reason = self._run(min(SETTLE_EVERY, iters - driver.iterations))
+            reason = self._run(min(policy.SETTLE_EVERY, iters - driver.iterations))
             current = self._read()
             if has_settled(previous, current, self.spaces.n_bands):
                 break
@@ -85,22 +85,25 @@ class Phases:
         return read(self.spaces.window(self.driver.x), self.rank)
 
     def _run(self, iters: int) -> str | None:
-        """Up to ``iters`` iterations in the current space; a hook due on the way acts between its iterations."""
-        for hook in self.hooks:
-            first = hook.due_in(self.driver.iterations, iters)
-            if first is not None:
-                reason = self._iterate(first)
-                if reason:
-                    return reason
-                hook.act(self.problem, self.driver)
-                iters -= first
-        return self._iterate(iters)
+        """Up to ``iters`` iterations in the current space; hooks due on the way act between iterations, the
+        earliest first."""
+        while True:
+            due = [(first, i) for i, hook in enumerate(self.hooks)
+                   if (first := hook.due_in(self.driver.iterations, iters)) is not None]
+            if not due:
+                return self._iterate(iters)
+            first, i = min(due)
+            reason = self._iterate(first)
+            if reason:
+                return reason
+            self.hooks[i].act(self.problem, self.driver)
+            iters -= first
 
     def _iterate(self, iters: int) -> str | None:
         return self.driver.run(self.problem, iters, self.tracker.on(self.problem), self.should_stop)
 
     # ---- carrying out the policy's actions -----------------------------------------------------------
-    def _enter_subspace(self, problem: Problem):
+    def _enter_subspace(self):
         action = on_entry(self._read(), self.rank, self.spaces.n_bands)
         if isinstance(action, Stay):
             self.tracker.report.lines.append(subspace_line(self.spaces.n_bands, self.spaces.n_bands, 0, 1.0,
@@ -118,8 +121,9 @@ class Phases:
         self.tracker.report.lines.append(subspace_line(action.basis.shape[1], self.spaces.n_bands,
                                                        self.driver.iterations + 1, action.captured, action.how))
 
-    def _check_width(self, problem: Problem):
+    def _check_width(self):
         """One full proximal-gradient step from v = B·c, and the policy's Move or Leave."""
+        problem = self.problem
         step = self.driver.step * self.lipschitz / self.spaces.lipschitz      # the full space's step
         gain, before, stepped = self.spaces.full_step(problem, self.driver.x, step)
         self.tracker.count(self.spaces.full_step_transforms(problem))
@@ -140,20 +144,16 @@ class Phases:
         ever (the 96×128 target entered at iteration 91 with 32 vectors: PSNR frozen from iteration 100;
         ``tests/test_skips.py::test_a_late_entry_keeps_improving``). The first checkpoint in the new space sets the
         best."""
-        be, subspace = self.spaces.backend, problem.subspace
-        mix = action.basis.T @ subspace.basis
-        vector = getattr(subspace.model, "power_vector", None)      # none when its L was known (no power iteration)
-        moved = self.spaces.subspace(action.basis, start=None if vector is None else be.bandmix(vector, mix))
-        self.driver.move(lambda c: be.bandmix(c, mix), self._step(moved.subspace.lipschitz), moved.objective,
-                         evaluate=False)
-        if action.basis.shape[1] == subspace.rank:
+        moved, mapping = self.spaces.onto(problem, action.basis)
+        self.driver.move(mapping, self._step(moved.subspace.lipschitz), moved.objective, evaluate=False)
+        if action.basis.shape[1] == problem.rank:
             self._refreshes += 1
         self.problem = moved
 
     def _leave(self, problem: Problem, gain: float):
         """Back to band space (v = B·c exactly), momentum kept."""
-        band, be = self.spaces.band, self.spaces.backend
-        self.driver.move(lambda c: be.copy(problem.to_field(c)), self._step(self.spaces.lipschitz), band.objective)
+        band = self.spaces.band
+        self.driver.move(self.spaces.to_band(problem), self._step(self.spaces.lipschitz), band.objective)
         self.problem = band
         self._note(f"subspace left for band space at iteration {self.driver.iterations + 1}", gain)
 

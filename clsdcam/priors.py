@@ -276,6 +276,7 @@ class ProxAverage:
     def fused_subspace(self) -> Callable | None:
         """The one prior's fused subspace prox ``(c, basis, step, out)``, or None (several priors or none, or a
         backend without the fusion it runs on)."""
-        if len(self.priors) != 1 or not hasattr(self.backend, self.priors[0].fusion or "-"):
+        prior = self.priors[0] if len(self.priors) == 1 else None
+        if prior is None or prior.subspace_prox is None or (prior.fusion and not hasattr(self.backend, prior.fusion)):
             return None
-        return self.priors[0].subspace_prox
+        return prior.subspace_prox

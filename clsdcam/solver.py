@@ -117,8 +117,9 @@ class Solver:
         spaces = Spaces(self.model, self.b, priors, self.calibration.filters, self.lipschitz, self.last_lipschitz)
         rules = Rules(tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart)
         algorithm = ALGORITHMS[s.algorithm](be, start.field, start.step_factor / self.lipschitz, rules)
-        driver = Driver(algorithm, rules, None if start.basis is not None else spaces.band.objective)  # a carried
-        tracker = Tracker(self.model, scale, snapshots, progress)               # basis is entered at once: no F(x0)
+        # a carried basis is entered at once: no band-space F(x0)
+        driver = Driver(algorithm, rules, None if start.basis is not None else spaces.band.objective)
+        tracker = Tracker(self.model, scale, snapshots, progress)
         off = [row.name for row in PRIORS if row.name not in {p.name for p in priors}]
         tracker.report.lines += [line for line in (field_line(self.geometry), self._bands_line(), terms_line(off))
                                  if line]
@@ -208,7 +209,8 @@ class Solver:
             "stop_reason": reason,
             "lipschitz": self.lipschitz,
             "final_step": step,
-            **{f"{key}s": sum(bool(r.get(key)) for r in history) for key in ("restart", "rollback", "backoff")},
+            **{f"{key}s": sum(bool(r.get(key)) for r in history)     # restart: FISTA's own key (0 for others)
+               for key in ("restart", "rollback", "backoff")},
             "data_scale": scale,
             "field_shape": model.field_shape,
             "window_offset": model.offset,

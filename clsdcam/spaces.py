@@ -57,6 +57,19 @@ class Spaces:
         self._last.set(basis, sub.lipschitz)
         return Problem(sub.model, self.b, sub.prox, sub.penalty, sub.rank, subspace=sub)
 
+    def onto(self, problem: Problem, basis: np.ndarray) -> tuple[Problem, object]:
+        """The problem on another ``basis`` and the mapping of ``problem``'s coefficients to it, c ↦ B'ᵀB·c (lossless
+        when span(B') ⊇ span(B)); its power iteration starts from the old one's eigenvector, mapped."""
+        be, subspace = self.backend, problem.subspace
+        mix = basis.T @ subspace.basis
+        vector = getattr(subspace.model, "power_vector", None)      # none when its L was known (no power iteration)
+        moved = self.subspace(basis, start=None if vector is None else be.bandmix(vector, mix))
+        return moved, lambda c: be.bandmix(c, mix)
+
+    def to_band(self, problem: Problem):
+        """The mapping of ``problem``'s iterates to band space, v = B·c (a new array)."""
+        return lambda c: self.backend.copy(problem.to_field(c))
+
     def window(self, x) -> np.ndarray:
         """The sensor window of a band cube, on the host."""
         return self.model.window(x)

@@ -11,6 +11,7 @@ import bench_accuracy  # noqa: E402
 import bench_iteration  # noqa: E402
 import bench_panel  # noqa: E402
 import bench_recon  # noqa: E402
+import compare_recon  # noqa: E402
 import rank_signals  # noqa: E402
 import weight_oracles  # noqa: E402
 
@@ -216,3 +217,18 @@ def test_weight_oracles_scores_a_sweep_by_the_truth_and_two_oracle_risks(tmp_pat
     assert all(row["predicted"] > 0 and row["projected"] > 0 for row in scene["rows"])
     table = capsys.readouterr().out
     assert table.count("\n| ") == 4 and table.count("*") == 4
+
+
+def test_compare_recon_passes_the_same_code_and_catches_a_changed_cube(tmp_path, capsys):
+    record = ["record", "--size", "24x32", "--full-size", "24x32", "--bands", "8", "--iters", "12", "--frames", "2",
+              "--scenes", "target,leds"]
+    for name in ("a.npz", "b.npz"):
+        assert compare_recon.main(record[:1] + [str(tmp_path / name)] + record[1:]) == 0
+    assert compare_recon.main(["compare", str(tmp_path / "a.npz"), str(tmp_path / "b.npz"), "--tol", "0"]) == 0
+    assert "14 runs compared, 0 failed" in capsys.readouterr().out
+    with np.load(tmp_path / "b.npz") as data:
+        arrays = {key: data[key] for key in data.files}
+    arrays["panel|leds|default"] = arrays["panel|leds|default"] * (1 + 1e-4)
+    np.savez(tmp_path / "c.npz", **arrays)
+    assert compare_recon.main(["compare", str(tmp_path / "a.npz"), str(tmp_path / "c.npz")]) == 1
+    assert "panel/leds/default: relative L2 1.00e-04" in capsys.readouterr().out

@@ -9,7 +9,8 @@ An algorithm minimises F(x) = f(x) + g(x) for a problem (:class:`clsdcam.problem
 
 and keeps whatever iterates it needs. To the driver it is:
 
-* ``x``: the current iterate (what the checkpoints score and the solve returns), ``step``: its step size;
+* ``backend``: the backend its arrays live on; ``x``: the current iterate (what the checkpoints score and the
+  solve returns); ``step``: its step size (the checkpoints halve it on a back-off);
 * ``iterate(problem) -> dict``: one iteration; the record's numbers, at least ``data`` (f where the gradient was
   taken), ``change`` (‖x⁺ − x‖/‖x⁺‖) and ``transforms`` (the FFTs it did), plus its own (FISTA: ``momentum``,
   ``restart``);
@@ -27,6 +28,7 @@ from typing import Any, Protocol, Sequence
 
 
 class Algorithm(Protocol):
+    backend: Any
     x: Any
     step: float
 
@@ -43,7 +45,8 @@ class Algorithm(Protocol):
 def place(backend, previous: Sequence, sources: Sequence) -> list:
     """Copies of ``sources`` (one per slot of ``previous``) written into ``previous``'s arrays when they all have the
     sources' shape and dtype and none of them is a source (a space of the same size: no new cubes, whose first touch
-    costs ~40 ms each for a 64×256×320 cube on a 2-core VM), else into new arrays."""
+    costs ~40 ms each for a 64×256×320 cube on a 2-core VM), else into new arrays. Aliasing is told by identity: a
+    mapping must return new arrays or the iterates themselves, not views of them."""
     like = sources[0]
     same = all(a is not None and a.shape == like.shape and a.dtype == like.dtype for a in previous)
     if not same or any(a is s for a in previous for s in sources):

@@ -23,15 +23,17 @@ def next_momentum(t: float) -> float:
 
 
 def stats_from_primitives(backend, x_new, x_old, y, scratch) -> tuple[float, float, float]:
-    """(‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩) with d = x⁺ − x in ``scratch``: ⟨y − x⁺, d⟩ = ⟨y, d⟩ − ⟨x⁺, d⟩."""
+    """(‖x⁺ − x‖², ‖x⁺‖², ⟨y − x⁺, x⁺ − x⟩) with d = x⁺ − x in ``scratch`` and y − x⁺ formed in y itself (y is
+    rewritten by the extrapolation next: the difference is taken before the products, with no cancellation)."""
     d = backend.axpy(-1.0, x_old, x_new, out=scratch)
-    return backend.vdot(d, d), backend.vdot(x_new, x_new), backend.vdot(y, d) - backend.vdot(x_new, d)
+    e = backend.axpy(-1.0, x_new, y, out=y)
+    return backend.vdot(d, d), backend.vdot(x_new, x_new), backend.vdot(e, d)
 
 
-def extrapolate_from_primitives(backend, x_new, x_old, beta: float, out):
-    """out = (1 + β)·x⁺ − β·x (``out`` distinct from both)."""
-    backend.scale(1.0 + beta, x_new, out=out)
-    return backend.axpy(-beta, x_old, out, out=out)
+def extrapolate_from_primitives(backend, x_new, x_old, beta: float, out, scratch):
+    """out = x⁺ + β·(x⁺ − x), the difference in ``scratch`` (``out`` may alias x_old, not x_new)."""
+    d = backend.axpy(-1.0, x_old, x_new, out=scratch)
+    return backend.axpy(beta, d, x_new, out=out)
 
 
 class Fista:
@@ -81,7 +83,7 @@ class Fista:
     def _extrapolate(self, beta: float):
         if self._fused_extrapolate is not None:
             return self._fused_extrapolate(self.x, self.x_prev, beta, out=self.y)
-        return extrapolate_from_primitives(self.backend, self.x, self.x_prev, beta, self.y)
+        return extrapolate_from_primitives(self.backend, self.x, self.x_prev, beta, self.y, self.z)
 
     def _place(self, sources):
         """x, x_prev, y, z ← copies of ``sources`` (z: scratch, first written by the gradient step)."""
