@@ -23,6 +23,11 @@ _LAZY = {
 __all__ = ["__version__", *_LAZY]
 
 
+def __dir__():
+    """The module's names and the public ones it loads on first use (``dir(clsdcam)``), nothing imported."""
+    return sorted(set(globals()) | set(__all__))
+
+
 def __getattr__(name):
     if name in _LAZY:
         import importlib

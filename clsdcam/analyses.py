@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from . import analysis, render, sim
+from .data import missing_text, shared_data_dir
 from .io import atomic_output, load_measurement
 
 SEPARATIONS = (1, 2, 3, 4, 5, 6, 7, 8, 10, 12, 14, 16, 20, 24, 32)
@@ -24,19 +25,26 @@ REAL_PSFS = {"Spectral DiffuserScope (measured)": "psf/spectraldiffuserscope_psf
 
 # ---- the analyses ------------------------------------------------------------------------------
 def run_resolution(args, out: Path) -> dict:
-    """The simulated caustic at --size, then each measured PSF present (dark ring subtracted, binned)."""
+    """The simulated caustic at --size, then each measured PSF present in the shared data folder (dark ring
+    subtracted, binned); an absent one is recorded as skipped, with why (:func:`skipped_lines`)."""
     psf = sim.caustic_psf(tuple(args.size), args.seed)
     result = {"simulated caustic": psf_resolution(psf, out / "resolution.png", 1)}
     for label, relative in REAL_PSFS.items():
-        path = sim.shared_data_dir() / relative
+        path = shared_data_dir() / relative
         if not path.exists():
-            result[label] = {"skipped": f"{relative} not present"}
+            result[label] = {"skipped": missing_text(relative)}
             continue
         raw = load_measurement(path)
         measured, factor = analysis.measured_psf(raw)
         result[label] = psf_resolution(measured, out / f"resolution_{path.stem}.png", factor)
         result[label]["native_shape"] = list(raw.shape)
     return {"level": 0.7, "superpixel_px": sim.SUPERPIXEL_PX, "psfs": result}
+
+
+def skipped_lines(name: str, result: dict) -> list[str]:
+    """One printed line per part of an analysis that was skipped, with why (the measured PSFs not found)."""
+    return [f"{name}: {label} skipped: {part['skipped']}" for label, part in result.get("psfs", {}).items()
+            if "skipped" in part]
 
 
 def psf_resolution(psf: np.ndarray, picture: Path, binning: int) -> dict:

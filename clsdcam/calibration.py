@@ -61,9 +61,12 @@ class Calibration:
         src, psf, filters = self.source, self.psf, self.filters
         if psf.ndim != 2 or min(psf.shape) < 1:
             raise InputError(f"{src}: psf must be a 2-D image, found shape {psf.shape}")
-        if filters.ndim != 3 or filters.shape[1:] != psf.shape:
-            raise InputError(f"{src}: filters {filters.shape} do not match psf {psf.shape} "
-                             f"(expected (K, {psf.shape[0]}, {psf.shape[1]}))")
+        if filters.ndim != 3:
+            raise InputError(f"{src}: filters must be 3-D (K, {psf.shape[0]}, {psf.shape[1]}) for the "
+                             f"{shape_text(psf.shape)} psf, found {filters.ndim}-D shape {shape_text(filters.shape)}")
+        if filters.shape[1:] != psf.shape:
+            raise InputError(f"{src}: filters of {shape_text(filters.shape[1:])} per band do not match psf "
+                             f"{shape_text(psf.shape)}")
         if self.wavelengths.shape != (filters.shape[0],):
             raise InputError(f"{src}: {self.wavelengths.size} wavelengths for {filters.shape[0]} bands")
         if not np.any(psf):

@@ -40,21 +40,31 @@ def atomic_output(path):
 
 
 def check_output(path, what: str = "output") -> Path:
-    """``path`` as a Path, after checking, before any work, that a file can be written there: not an
-    existing directory, its folder creatable and writable (a probe file is made and removed); InputError
-    (one line) otherwise."""
+    """``path`` as a Path, after checking, before any work, that a file can be written there: not an existing
+    directory, in a folder that exists or can be created (:func:`check_folder`); InputError (one line) otherwise.
+    Nothing is created: a missing folder is made when the file is written (:func:`atomic_output`)."""
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{what} {path}: is a directory (give a file name)")
-    folder = path.parent
+    check_folder(path.parent, f"{what} {path}")
+    return path
+
+
+def check_folder(folder, what: str = "output folder") -> Path:
+    """``folder`` as a Path, after checking that files can be written into it, creating nothing that lasts: its
+    nearest existing ancestor (itself, when it exists) must be a folder in which a probe file can be made (and
+    is removed); InputError (one line, naming ``what``) otherwise."""
+    folder = Path(folder)
+    existing = next(p for p in (folder, *folder.parents) if p.exists())
+    if not existing.is_dir():
+        raise InputError(f"{what}: cannot write there: {existing} is a file, not a folder")
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / f".{path.name}.{secrets.token_hex(4)}.probe"
+        probe = existing / f".clsdcam.{secrets.token_hex(4)}.probe"
         probe.touch()
         probe.unlink()
     except OSError as exc:
-        raise InputError(f"{what} {path}: cannot write there ({exc.strerror or exc})") from None
-    return path
+        raise InputError(f"{what}: cannot write there: {existing} ({exc.strerror or exc})") from None
+    return folder
 
 
 # ---- reading helpers ----------------------------------------------------------------------
@@ -75,7 +85,8 @@ def require_finite(array: np.ndarray, name: str) -> np.ndarray:
     bad = ~np.isfinite(array)
     if bad.any():
         first = ", ".join(str(int(i)) for i in np.argwhere(bad)[0])
-        raise InputError(f"{name}: {int(bad.sum())} non-finite values (NaN/Inf), first at ({first})")
+        count = int(bad.sum())
+        raise InputError(f"{name}: {count} non-finite value{'s' * (count != 1)} (NaN/Inf), first at ({first})")
     return array
 
 
@@ -144,18 +155,36 @@ def load_measurement(path) -> np.ndarray:
 
 
 def _read_image(path: Path) -> np.ndarray:
-    """8/16-bit grey PNG or TIFF as an integer array (PIL for PNG, tifffile for TIFF)."""
+    """8/16-bit grey PNG or TIFF as an integer array (PIL for PNG, tifffile for TIFF). A file that holds no image
+    data (tifffile reads a truncated TIFF as an empty array, and logs why) is an InputError, without the log."""
     try:
         if path.suffix.lower() == ".png":
             from PIL import Image
 
             with Image.open(path) as image:
-                return np.asarray(image)
-        import tifffile
-
-        return tifffile.imread(path)
+                data = np.asarray(image)
+        else:
+            data = _read_tiff(path)
     except Exception as exc:  # the imaging libraries raise many types for corrupt files
         raise InputError(f"measurement {path}: not a readable image ({first_line(exc)})") from None
+    if data.size == 0:
+        raise InputError(f"measurement {path}: not a readable image (no image data: truncated or damaged file)")
+    return data
+
+
+def _read_tiff(path: Path) -> np.ndarray:
+    """tifffile.imread with tifffile's logger silenced: a damaged file becomes one InputError line, not a log line
+    and then an error."""
+    import logging
+
+    import tifffile
+
+    log = logging.getLogger("tifffile")
+    disabled, log.disabled = log.disabled, True
+    try:
+        return tifffile.imread(path)
+    finally:
+        log.disabled = disabled
 
 
 def _read_npy(path: Path) -> np.ndarray:

@@ -15,6 +15,7 @@ import numpy as np
 
 from .errors import InputError
 from .io import atomic_output
+from .picks import spectrum_points
 
 OBSERVER = "CIE 1931 2 Degree Standard Observer"
 PERCENTILE = 99.5          # display white: this percentile of the brightest channel
@@ -134,21 +135,6 @@ def false_colour(cube, wavelengths) -> np.ndarray:
     return _to_display(rgb)
 
 
-def brightest_points(image, n: int = 4, min_distance: int | None = None) -> list[tuple[int, int]]:
-    """Up to ``n`` (y, x) maxima of a 2-D image, greedily: take the argmax, suppress every pixel
-    closer than ``min_distance`` (Euclidean; default max(1, H // 8)) and repeat."""
-    image = np.array(image, dtype=np.float64)
-    h, w = image.shape
-    min_distance = max(1, h // 8) if min_distance is None else min_distance
-    yy, xx = np.mgrid[:h, :w]
-    points = []
-    while len(points) < n and np.isfinite(image).any():
-        y, x = np.unravel_index(np.nanargmax(np.where(np.isfinite(image), image, np.nan)), image.shape)
-        points.append((int(y), int(x)))
-        image[(yy - y) ** 2 + (xx - x) ** 2 < min_distance ** 2] = -np.inf
-    return points
-
-
 # ---- figures ---------------------------------------------------------------------------
 def _figure(**kwargs):
     """A matplotlib Figure on its own Agg canvas (no pyplot state, nothing to close)."""
@@ -189,16 +175,21 @@ def projections_figure(cube, wavelengths, image):
 
 
 def spectra_figure(cube, wavelengths, image, points, truth=None):
-    """v(λ, y, x) against λ at each (y, x) in ``points`` (solid), the truth dashed in the same
-    colour, and the points marked on the false-colour ``image``."""
+    """v(λ, y, x) against λ at each (y, x) in ``points`` (solid), the truth dashed, both in the colour of the light
+    there (:func:`_light_colour`), and the points numbered on the false-colour ``image``."""
+    from matplotlib.patheffects import withStroke
+
+    outline = [withStroke(linewidth=3, foreground="black")]
     fig = _figure(figsize=(12, 4.8))
     ax_img, ax_spec = fig.subplots(1, 2, width_ratios=(1, 1.6))
     ax_img.imshow(image, interpolation="nearest")
     ax_img.set(title="points", xlabel="x (px)", ylabel="y (px)")
+    weights = _rgb_weights(wavelengths)
     for i, (y, x) in enumerate(points):
-        colour = SPECTRUM_COLOURS[i % len(SPECTRUM_COLOURS)]
-        ax_img.plot(x, y, "o", mfc="none", mec=colour, ms=10, mew=2)
-        ax_img.annotate(str(i + 1), (x, y), xytext=(6, 6), textcoords="offset points", color=colour)
+        colour = _light_colour((cube if truth is None else truth)[:, y, x], weights)
+        ax_img.plot(x, y, "o", mfc="none", mec="white", ms=10, mew=1.5, path_effects=outline)
+        ax_img.annotate(str(i + 1), (x, y), xytext=(6, 6), textcoords="offset points", color="white",
+                        fontweight="bold", path_effects=outline)
         ax_spec.plot(wavelengths, cube[:, y, x], ".-", color=colour, label=f"{i + 1}: (y={y}, x={x})")
         if truth is not None:
             ax_spec.plot(wavelengths, truth[:, y, x], "--", color=colour, label=f"{i + 1}: truth")
@@ -207,6 +198,15 @@ def spectra_figure(cube, wavelengths, image, points, truth=None):
     if points:
         ax_spec.legend(fontsize="small", ncols=2 if truth is not None else 1)
     return fig
+
+
+def _light_colour(spectrum, weights) -> tuple:
+    """The colour a spectrum is drawn in: its linear sRGB (``weights`` of :func:`_rgb_weights`) at full brightness
+    ×0.85; dark grey when that is nearly neutral (white light), black, or undefined, so that it shows on white."""
+    rgb = np.zeros(3) if weights is None else np.clip(np.asarray(spectrum, np.float64) @ weights, 0.0, None)
+    if rgb.max() <= 0 or rgb.min() > 0.5 * rgb.max():
+        return (0.25, 0.25, 0.25)
+    return tuple(0.85 * rgb / rgb.max())
 
 
 def profiles_figure(image, grey, point, truth=None):
@@ -232,47 +232,57 @@ def profiles_figure(image, grey, point, truth=None):
 
 
 def convergence_figure(history):
-    """Objective and data term against iteration on a log axis; non-finite and non-positive
-    values (e.g. the objective on iterations where it was not evaluated) are left out."""
+    """The two curves a solve records, against the iterations done, on a log axis; both are halved squared norms
+    in the measurement's units squared (the solver's records times max|b|², so they compare with each other):
+
+    - objective F(x) = ½‖A·x − b‖² + the priors' penalties at the iterate x after step k, evaluated at checkpoints
+      only (iteration 1, every ``objective_every`` and the last) and the best so far (a rise is rolled back), dots;
+    - data term f(y) = ½‖A·y − b‖² at the point y that step k started from (FISTA's extrapolated point; the start
+      for k = 1, so ½‖b‖² from a zero start), a line drawn at k − 1: the iterations done when y was reached.
+
+    Without the shift, step k's data term (taken before the step, at y) would sit beside the objective after
+    it, above it at k = 1 by the whole first step. Non-finite and non-positive values are left out."""
     try:
         iterations = np.array([r["iteration"] for r in history], dtype=np.float64)
         series = {key: np.array([r.get(key, np.nan) for r in history], dtype=np.float64)
                   for key in ("objective", "data")}
     except (TypeError, KeyError, ValueError, AttributeError):
         raise InputError("history: expected a list of dicts with numeric 'iteration', 'data' and 'objective'") from None
-    fig = _figure(figsize=(7, 4.5))
+    fig = _figure(figsize=(7.5, 4.5))
     ax = fig.subplots()
-    plotted = False
-    for (key, values), style in zip(series.items(), ("o-", "-")):
-        keep = np.isfinite(values) & (values > 0)
+    curves = (("objective", iterations, "o", "objective F(x) = ½‖A·x − b‖² + priors, at checkpoints"),
+              ("data", iterations - 1, "-", "data term ½‖A·y − b‖² at the point the next step starts from"))
+    for key, at, style, label in curves:
+        keep = np.isfinite(series[key]) & (series[key] > 0)
         if keep.any():
-            ax.plot(iterations[keep], values[keep], style, ms=3, label=key)
-            plotted = True
-    if plotted:
+            ax.plot(at[keep], series[key][keep], style, ms=4, label=label)
+    if ax.lines:
         ax.set_yscale("log")
-        ax.legend()
+        ax.legend(fontsize="small")
     seconds = history[-1].get("seconds", np.nan)
-    ax.set(title=f"convergence: {len(history)} iterations in {seconds:.3g} s", xlabel="iteration", ylabel="value")
+    ax.set(title=f"convergence: {len(history)} iterations in {seconds:.3g} s", xlabel="iterations done",
+           ylabel="value (measurement units²)")
     ax.grid(alpha=0.3, which="both")
     return fig
 
 
 def save_pictures(prefix, cube, wavelengths, history=None, points=None, truth=None) -> list[Path]:
-    """Write ``{prefix}_falsecolour.png``, ``_projections.png``, ``_spectra.png`` and, when
-    ``history`` is a non-empty list, ``_convergence.png``; return their paths. A one-band cube (a plain
-    DiffuserCam) gets ``_image.png`` (grey) and ``_profiles.png`` (row and column through its first point)
-    instead of the colour, projection and spectrum pictures.
+    """Write ``{prefix}_falsecolour.png``, ``_projections.png``, ``_spectra.png`` and, when ``history`` is a
+    non-empty list, ``_convergence.png``; return their paths. A one-band cube (a plain DiffuserCam) gets
+    ``_image.png`` (grey) and ``_profiles.png`` (row and column through its first point) instead of the colour,
+    projection and spectrum pictures.
 
-    ``points`` are (y, x) pixels for the spectra (default: up to 4 brightest pixels of the band sum,
-    at least H // 8 apart); ``truth`` is a cube of the same shape drawn dashed. Bands are sorted
-    by wavelength first. Bad shapes or points raise InputError before anything is written.
+    ``points`` are (y, x) pixels for the spectra (default: one per distinct lit region of the truth when given,
+    else of the cube: :func:`clsdcam.picks.spectrum_points`), numbered on the false-colour image; ``truth`` is a
+    cube of the same shape drawn dashed. Bands are sorted by wavelength first. Bad shapes or points raise
+    InputError before anything is written.
     """
     cube, wavelengths, truth, points = _check(cube, wavelengths, truth, points)
     order = np.argsort(wavelengths, kind="stable")
     cube, wavelengths = cube[order], wavelengths[order]
     truth = None if truth is None else truth[order]
     image = false_colour(cube, wavelengths)
-    points = brightest_points(cube.sum(axis=0)) if points is None else points
+    points = spectrum_points(cube if truth is None else truth, wavelengths) if points is None else points
     if cube.shape[0] == 1:
         first = "image"
         figures = {"profiles": profiles_figure(cube[0], image[..., 0], points[0] if points else (0, 0),

@@ -51,11 +51,11 @@ class SkipReport:
 def field_line(geometry: FieldGeometry) -> str:
     paper = centred_geometry(geometry.sensor)
     if geometry.field == paper.field:
-        return f"field: {shape_text(geometry.field)} (the paper's)"
+        return f"field: none cut: {shape_text(geometry.field)} (the paper's)"
     (ylo, yhi), (xlo, xhi) = geometry.support
-    ratio = geometry.voxels_per_band / paper.voxels_per_band
-    return (f"field: {shape_text(geometry.field)} instead of {shape_text(paper.field)} ({100 * ratio:.0f}% of the voxels; "
-            f"PSF support rows {ylo}…{yhi}, columns {xlo}…{xhi} from its centre)")
+    cut = 1.0 - geometry.voxels_per_band / paper.voxels_per_band
+    return (f"field: {shape_text(geometry.field)} instead of {shape_text(paper.field)} ({100 * cut:.0f}% of the paper's "
+            f"field cut; PSF support rows {ylo}…{yhi}, columns {xlo}…{xhi} from its centre)")
 
 
 def bands_line(filters: np.ndarray) -> str | None:

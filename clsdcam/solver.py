@@ -255,7 +255,10 @@ def reconstruct(measurement, calibration, backend="numpy", device: str | None = 
     """Reconstruct a cube from one measurement (an array or an image/.npy/.h5 path) with a calibration (a
     :class:`~clsdcam.calibration.Calibration` or a file path), preprocessed as the command line does
     (``preprocessing``: a :class:`~clsdcam.calibration.Preprocessing`, default its defaults); the cube comes
-    back in the calibration's units. ``settings`` are the fields of ``Settings``."""
+    back in the calibration's units. ``settings`` are the fields of ``Settings``. ``backend`` (also
+    :class:`Solver`'s): ``"numpy"`` by default, the reference, the same result on every machine; ``"opencl"``; or
+    ``"auto"``, the command line's default (:func:`clsdcam.backends.resolve_backend`: OpenCL on a GPU when one is
+    found, else NumPy)."""
     from .calibration import prepare
 
     calibration, measurement = prepare(measurement, calibration, preprocessing)

@@ -213,7 +213,7 @@ def test_analyze_all_through_a_parser(tmp_path, capsys, monkeypatch):
 
 def test_each_analysis_is_a_sub_choice_with_its_own_options(tmp_path):
     args = parser().parse_args(["analyze", "resolution", str(tmp_path), "--size", "40x48"])
-    assert (args.what, args.size, args.recon_size) == ("resolution", (40, 48), (64, 96))
+    assert (args.what, args.size) == ("resolution", (40, 48)) and not hasattr(args, "recon_size")
     assert cli_analyze.run(args) == 0
     result = json.loads((tmp_path / "resolution.json").read_text())["psfs"]
     assert 2.0 <= result["simulated caustic"]["pixels"] <= 4.5

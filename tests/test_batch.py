@@ -236,7 +236,7 @@ def test_batch_help_shows_defaults_and_ends_with_examples(capsys):
     with pytest.raises(SystemExit) as done:
         main(["batch", "--help"])
     text = capsys.readouterr().out
-    assert done.value.code == 0 and "(default: 1)" in text and "(default: numpy)" in text
+    assert done.value.code == 0 and "(default: 1)" in text and "(default: auto)" in text
     options, examples = text.split("\nexamples:\n")
     assert "--dead-pixels" in options and 2 <= examples.count("clsdcam batch ") <= 3
     assert not any(flag in text for flag in ("--png", "--full-field", "--saturation"))
@@ -301,14 +301,23 @@ def test_external_scheduler_and_worker(video, tmp_path):
                 process.wait()
 
 
-def test_a_bad_frame_is_recorded_and_the_rest_go_on(video, tmp_path, capsys):
+def test_a_frame_damaged_during_the_run_is_recorded_and_the_rest_go_on(video, tmp_path, capsys, monkeypatch):
+    """Every frame is checked before the run (tests/test_batch_checks.py); frames 3 and 6, damaged after that
+    check, fail with their reasons and the others go on."""
     folder = tmp_path / "frames"
     folder.mkdir()
     frames = np.load(video["frames"])
-    frames[3, 2, 2] = np.nan
     for i, frame in enumerate(frames):
         np.save(folder / f"f{i:02d}.npy", frame)
-    (folder / "f06.npy").write_bytes(b"not a numpy file")
+    read = stream._read
+
+    def damaged_on_the_way(source, i):
+        if i == 3:
+            np.save(folder / "f03.npy", np.where(np.eye(*frames[3].shape, k=0, dtype=bool), np.nan, frames[3]))
+            (folder / "f06.npy").write_bytes(b"not a numpy file")
+        return read(source, i)
+
+    monkeypatch.setattr(stream, "_read", damaged_on_the_way)
     code = main(["batch", str(folder), "--calibration", str(video["calibration"]), "-o", str(tmp_path / "out.h5"),
                  "--workers", "0", "--iters", "10", "--quiet"])
     assert code == 1

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from clsdcam.errors import InputError
-from clsdcam.render import band_widths, brightest_points, false_colour, save_pictures
+from clsdcam.render import band_widths, false_colour, save_pictures
 
 VISIBLE = np.arange(400.0, 701.0, 10.0)     # 31 uniform bands
 
@@ -72,15 +72,6 @@ def test_unsorted_wavelengths_give_the_same_colour():
     order = np.random.default_rng(3).permutation(VISIBLE.size)
     cube = np.random.default_rng(4).random((VISIBLE.size, 4, 4), dtype=np.float32)
     assert np.allclose(false_colour(cube[order], VISIBLE[order]), false_colour(cube, VISIBLE), atol=1e-6)
-
-
-def test_brightest_points_are_spread():
-    image = np.zeros((64, 64))
-    image[10, 10], image[11, 11], image[50, 40], image[30, 60] = 5, 4, 3, 2
-    points = brightest_points(image)
-    assert points[:3] == [(10, 10), (50, 40), (30, 60)]     # (11, 11) is within H // 8 of (10, 10)
-    assert len(points) == 4
-    assert all(np.hypot(a[0] - b[0], a[1] - b[1]) >= 8 for i, a in enumerate(points) for b in points[:i])
 
 
 def read_png(path):

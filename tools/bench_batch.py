@@ -1,19 +1,21 @@
 #!/usr/bin/env python3
 """Batch throughput and warm starts.
 
-    python tools/bench_batch.py throughput --size 320x448 --bands 64 --frames 4 --iters 10 --workers 1,2
-    python tools/bench_batch.py warm --size 64x96 --bands 32 --frames 6 --iters 200
+    python tools/bench_batch.py throughput --size 320x448 --bands 64 --frames 17 --iters 10 --workers 0,1,2 --repeat 3
+    python tools/bench_batch.py stream --frames 17 --iters 10 --reference-iters 0
 
-``throughput``: frames/s of ``clsdcam batch`` (embedded LocalCluster) for each worker count, in one
-run, on a simulated video (``--scene``). ``warm``: for each frame after the first, the iterations a
-warm-started solve (from the previous frame's cube) needs to reach the PSNR a cold start has after
-``--iters``, starting from the previous cube as is and from the motion-predicted one that
-``clsdcam batch`` uses (``clsdcam.batch.predict``); prints a markdown table (and ``--json``).
+``throughput``: frames/s of ``clsdcam batch`` for each worker count (0: in this process; else an
+embedded LocalCluster, processes × threads as the batch chooses them), on a simulated video
+(``--scene``); the counts run in turn ``--repeat`` times (medians: a busy machine slows them alike),
+with the CPU seconds (user, system) of this process and its worker processes. ``stream``: one
+warm-started stream's steady state (see :func:`stream`). Both print a markdown table (and ``--json``).
 """
 from __future__ import annotations
 
 import argparse
 import json
+import resource
+import statistics
 import sys
 import tempfile
 import time
@@ -36,21 +38,43 @@ def throughput(args, workdir: Path) -> dict:
     paths = write_video(workdir, calibration, frames, truth)
     spec = BatchSpec(frames=(str(paths["frames"]),), calibration=str(paths["calibration"]),
                      settings=Settings(iters=args.iters))
-    rows = {}
-    for workers in args.workers:
-        start = time.perf_counter()
-        run_batch(spec, workdir / f"out-{workers}.h5", workers=workers, overwrite=True)
-        with h5py.File(workdir / f"out-{workers}.h5", "r") as f:
-            solve = float(np.mean(f["seconds"][...]))
-        rows[workers] = {"frames_per_s": args.frames / (time.perf_counter() - start), "solve_s_per_frame": solve}
-    one = rows[args.workers[0]]["frames_per_s"]
-    print(f"| workers | frames/s end to end ({args.bands}×{args.shape[0]}×{args.shape[1]}, {args.frames} frames, "
-          f"{args.iters} iterations; cluster start and model builds included) | vs {args.workers[0]} "
-          f"| solve s/frame (mean) |")
-    print("|---:|---:|---:|---:|")
+    runs = {workers: [] for workers in args.workers}
+    for _ in range(args.repeat):
+        for workers in args.workers:
+            runs[workers].append(_timed_batch(spec, workdir / f"out-{workers}.h5", workers))
+            print(f"--workers {workers}: {runs[workers][-1]}", file=sys.stderr, flush=True)
+    rows = {workers: {key: statistics.median(run[key] for run in done) if key != "layout" else done[0][key]
+                      for key in done[0]} for workers, done in runs.items()}
+    _print_throughput(args, rows)
+    return {str(k): {**v, "runs": runs[k]} for k, v in rows.items()}
+
+
+def _timed_batch(spec, output: Path, workers: int) -> dict:
+    """One batch from scratch: wall seconds, CPU seconds (user, system: this process and the worker processes it
+    started and reaped), the mean solve seconds per frame, and where it ran."""
+    before = [resource.getrusage(who) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
+    start = time.perf_counter()
+    summary = run_batch(spec, output, workers=workers, overwrite=True)
+    wall = time.perf_counter() - start
+    after = [resource.getrusage(who) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
+    with h5py.File(output, "r") as f:
+        solve, iterations = float(np.mean(f["seconds"][...])), int(np.sum(f["iterations"][...]))
+    return {"seconds": wall, "frames_per_s": summary.n_frames / wall, "solve_s_per_frame": solve, "iterations": iterations,
+            "user_s": sum(a.ru_utime - b.ru_utime for a, b in zip(after, before)),
+            "system_s": sum(a.ru_stime - b.ru_stime for a, b in zip(after, before)), "layout": summary.layout}
+
+
+def _print_throughput(args, rows: dict):
+    first = args.workers[0]
+    print(f"{args.bands}×{args.shape[0]}×{args.shape[1]}, {args.frames} frames, --iters {args.iters}; medians of "
+          f"{args.repeat} (cluster start and model builds included)")
+    print(f"| --workers | ran on | s | frames/s | vs --workers {first} | CPU user s | CPU system s | iterations, all "
+          "frames | solve s/frame |")
+    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|")
     for workers, r in rows.items():
-        print(f"| {workers} | {r['frames_per_s']:.3f} | {r['frames_per_s'] / one:.2f}× | {r['solve_s_per_frame']:.2f} |")
-    return {str(k): v for k, v in rows.items()}
+        print(f"| {workers} | {r['layout']} | {r['seconds']:.1f} | {r['frames_per_s']:.3f} | "
+              f"{r['frames_per_s'] / rows[first]['frames_per_s']:.2f}× | {r['user_s']:.0f} | {r['system_s']:.1f} | "
+              f"{r['iterations']:.0f} | {r['solve_s_per_frame']:.2f} |")
 
 
 def stream(args, workdir: Path) -> dict:
@@ -110,7 +134,8 @@ def main(argv=None) -> int:
                         help="stream: each frame also solved cold with this many iterations (0: not)")
     parser.add_argument("--drift", default="0.3,0.6", help="stream: the scene's drift, DY,DX px per frame")
     parser.add_argument("--backend", default="numpy", help="stream: numpy or opencl")
-    parser.add_argument("--workers", default="1,2", help="throughput: worker counts, one batch each")
+    parser.add_argument("--workers", default="0,1,2", help="throughput: worker counts, one batch each")
+    parser.add_argument("--repeat", type=int, default=1, help="throughput: rounds over the worker counts (medians)")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
     args.shape = tuple(int(v) for v in args.size.split("x"))

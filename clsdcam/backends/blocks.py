@@ -6,9 +6,13 @@ temporaries of a multi-step computation stay in cache and the cube is read once.
 Thread t gets the t-th contiguous span of rows and walks it block by block. While blocks run
 on several threads, BLAS (matrix products inside a block) is held to one thread each:
 OpenBLAS's own threads on top of ours made the subspace prox 2.5× slower on two cores.
+A host backend's threads (its pocketfft ``workers`` and the blocks' threads) are
+:func:`host_threads`: ``CLSDCAM_THREADS`` when set (how ``clsdcam batch`` gives each worker process
+its share of the cores), else the cores this process may run on.
 """
 from __future__ import annotations
 
+import os
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 from functools import lru_cache
@@ -16,7 +20,28 @@ from typing import Callable
 
 import numpy as np
 
+from ..errors import InputError
+
+THREADS_VARIABLE = "CLSDCAM_THREADS"
 BLOCK_BYTES = 2 << 20     # per array: measured best on a 2-core Zen 3 (512 KiB L2, 32 MiB L3), 64×576×800
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one, else all)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity on this system (macOS, Windows)
+        return os.cpu_count() or 1
+
+
+def host_threads() -> int:
+    """Threads of a host backend: ``CLSDCAM_THREADS`` (an integer ≥ 1) when set, else :func:`available_cores`."""
+    text = os.environ.get(THREADS_VARIABLE, "").strip()
+    if not text:
+        return available_cores()
+    if not text.isdigit() or int(text) < 1:
+        raise InputError(f"{THREADS_VARIABLE}={text!r}: expected an integer ≥ 1 (threads of a host solver)")
+    return int(text)
 
 
 @lru_cache(maxsize=4)

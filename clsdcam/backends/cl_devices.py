@@ -120,6 +120,16 @@ def choose_device(substring: str | None = None):
     return devices[0][1]
 
 
+def find_gpu():
+    """The first OpenCL GPU (:func:`is_gpu`), or None when there is none, no driver or no pyopencl: never an error
+    (what ``--backend auto`` asks before it chooses)."""
+    try:
+        devices = _all_devices()
+    except InputError:          # no pyopencl (its import failed), no platform, no device
+        return None
+    return next((device for _, device in devices if is_gpu(device)), None)
+
+
 def _pyopencl_ctx_device():
     cl = import_pyopencl()
     try:

@@ -26,7 +26,6 @@ goes through Bluestein's algorithm at a multiple of the cost).
 from __future__ import annotations
 
 import atexit
-import os
 from functools import lru_cache
 
 import numpy as np
@@ -35,6 +34,7 @@ import scipy.fft
 
 from ..errors import InputError
 from .base import DEVICE_ENGINES, check_engine
+from .blocks import host_threads
 from .cl_memory import mapped
 from .cl_program import Kernels
 
@@ -91,7 +91,7 @@ class HostFFT(RealFFT):
 
     def __init__(self, kernels: Kernels, workers: int | None = None):
         super().__init__(kernels)
-        self.workers = workers or os.cpu_count() or 1
+        self.workers = workers or host_threads()
 
     def fast_length(self, n: int) -> int:
         return scipy.fft.next_fast_len(int(n), real=True)

@@ -7,7 +7,6 @@ the heavy primitives run cache-blocked on row blocks over a few threads (``host_
 """
 from __future__ import annotations
 
-import os
 from contextlib import nullcontext
 
 import numpy as np
@@ -15,7 +14,7 @@ import scipy.fft
 
 from ..errors import InputError
 from . import host_linalg
-from .blocks import map_blocks, scratch_buffer
+from .blocks import host_threads, map_blocks, scratch_buffer
 from .convolution import host_path
 from .host_tv import haar_block, haar_limits, halo, subspace_tv_blocks, tv_norm_blocks
 
@@ -51,7 +50,7 @@ class NumpyBackend:
     def __init__(self, dtype="float32", workers: int | None = None):
         self.dtype = real_dtype(dtype)
         self.cdtype = COMPLEX_OF[self.dtype]
-        self.workers = workers or os.cpu_count() or 1
+        self.workers = workers or host_threads()
         self.device_name = "host CPU (NumPy/SciPy)"
         self.fft_engine = "scipy pocketfft"
 

@@ -3,7 +3,8 @@
 One module a part: :mod:`.spec` (what a batch is), :mod:`.frames` (where its frames come
 from), :mod:`.stream` (a chunk of frames as one warm-started stream, and the per-process
 solver cache), :mod:`.motion` (the warm start's drift prediction), :mod:`.parts` (part files,
-resume, the output file), :mod:`.distribute` (chunks on Dask or in this process). The names
+resume, the output file), :mod:`.workers` (processes × threads, the Dask client), :mod:`.distribute`
+(chunks on Dask or in this process). The names
 the rest of clsdcam uses are importable from here.
 """
 from .distribute import run_batch

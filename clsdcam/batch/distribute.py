@@ -1,5 +1,12 @@
 """The whole batch: the missing frames as chunks, in one process or on Dask distributed workers.
 
+Checks. Before anything is written, every frame still to compute is read once and checked
+(:meth:`FrameSource.check`): a frame that cannot be read or holds a NaN/Inf stops the batch with
+one line naming it and its first bad pixel.
+
+Workers. Where the chunks run, processes × threads, is :func:`clsdcam.batch.workers.plan_workers`'s
+choice (never more than the cores), said in the summary.
+
 Distribution. The frames still missing are cut into contiguous chunks (a chunk is one Dask
 task, so warm starts hold inside it). The worker writes its chunk into a temporary file and
 renames it to its part (:mod:`clsdcam.batch.parts`): a part is whole or absent. A task that
@@ -24,13 +31,13 @@ import uuid
 from dataclasses import replace
 from pathlib import Path
 
-from ..errors import InputError
 from ..io import check_output
 from ..provenance import provenance
 from .frames import FrameSource
 from .parts import assemble, chunks, claim, finished_parts, missing_frames, part_path, parts_dir
 from .spec import BatchInterrupted, BatchSpec, BatchSummary
 from .stream import Carried, failure_text, run_stream, solve_chunk
+from .workers import chunk_threads, connect, plan_workers
 
 
 def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None = None, chunk: int | None = None,
@@ -38,15 +45,18 @@ def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None =
     """Reconstruct every frame not yet in ``output``'s parts, then (re)build ``output``.
 
     ``workers`` = 0 (and no scheduler): one in-process stream (warm starts carried across its
-    chunks); otherwise Dask distributed, an embedded LocalCluster of ``workers`` processes or
-    the cluster at ``scheduler``. ``chunk`` defaults to ⌈missing / (2·worker threads)⌉, at
-    most MAX_CHUNK. ``on_plan(n_frames, n_missing)`` is called once the missing frames are
-    known, ``progress(k)`` as k more frames are done. InputError before any work if ``output``
-    (or its parts folder) cannot be written.
+    chunks); otherwise Dask distributed, an embedded LocalCluster (``workers`` processes at most, as
+    :func:`plan_workers` chooses) or the cluster at ``scheduler``. ``chunk`` defaults to
+    ⌈missing / workers⌉, at most MAX_CHUNK. ``on_plan(n_frames, n_missing, layout)`` is called once
+    the missing frames are known, ``progress(k)`` as k more frames are done. InputError before any
+    work, nothing written, if ``output`` (or its parts folder) cannot be written or a frame to
+    compute cannot be read or is not finite.
     """
     output, spec = check_output(Path(output).resolve()), _resolved(spec)
     source = FrameSource(spec.frames)
     n, parts = len(source), parts_dir(output)
+    source.check(range(n) if overwrite else missing_frames(parts, n))
+    layout = plan_workers(workers, scheduler)
     if overwrite:
         shutil.rmtree(parts, ignore_errors=True)
         output.unlink(missing_ok=True)
@@ -54,12 +64,12 @@ def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None =
     with _kept_on_interrupt(parts, n):
         missing = missing_frames(parts, n)
         if on_plan is not None:
-            on_plan(n, len(missing))
+            on_plan(n, len(missing), layout)
         start = time.perf_counter()
-        lost = _compute(spec, parts, missing, (workers, scheduler, chunk), _Progress(progress))
+        lost = _compute(spec, parts, missing, (layout, chunk), _Progress(progress))
         summary = assemble(output, n, lost, provenance({"frames": source.paths, "calibration": spec.calibration},
                                                        spec.preprocessing))
-    summary.computed_frames, summary.seconds = len(missing), time.perf_counter() - start
+    summary.computed_frames, summary.seconds, summary.layout = len(missing), time.perf_counter() - start, str(layout)
     return summary
 
 
@@ -87,13 +97,13 @@ def _kept_on_interrupt(parts: Path, n: int):
 def _compute(spec: BatchSpec, parts: Path, missing: list[int], how, progress) -> dict[int, str]:
     """Compute the missing frames' parts; {frame: reason} for frames lost with their whole chunk.
     On any exception, a parts folder with no part yet is removed (a failed start leaves no trace)."""
-    workers, scheduler, chunk = how
+    layout, chunk = how
     try:
-        if missing and workers == 0 and scheduler is None:
+        if missing and layout.processes == 0 and layout.scheduler is None:
             _run_serial(spec, parts, chunks(missing, chunk, 1), progress)
         elif missing:
-            with _client(workers, scheduler) as client:
-                slots = sum(client.nthreads().values()) or max(workers, 1)
+            with connect(layout) as client:
+                slots = sum(client.nthreads().values()) or max(layout.processes, 1)
                 return _run_dask(client, spec, parts, chunks(missing, chunk, slots), progress)
     except BaseException:
         if not finished_parts(parts):  # nothing computed (e.g. no scheduler): leave no trace
@@ -126,11 +136,13 @@ def _run_serial(spec, parts, bounds, progress):
 
 
 def _dask_chunk(spec, start, stop, part, topic):
-    """solve_chunk on a Dask worker, announcing each finished frame on the event ``topic``."""
+    """solve_chunk on a Dask worker (under :func:`chunk_threads`), announcing each finished frame on the event
+    ``topic``."""
     from distributed import get_worker
 
     worker = get_worker()
-    return solve_chunk(spec, start, stop, part, lambda i: worker.log_event(topic, i))
+    with chunk_threads():
+        return solve_chunk(spec, start, stop, part, lambda i: worker.log_event(topic, i))
 
 
 def _run_dask(client, spec, parts, bounds, progress) -> dict[int, str]:
@@ -153,31 +165,3 @@ def _run_dask(client, spec, parts, bounds, progress) -> dict[int, str]:
         client.unsubscribe_topic(topic)
         client.cancel(list(futures))
     return lost
-
-
-class _client:
-    """A Dask client on an embedded LocalCluster (``workers`` processes) or on ``scheduler``."""
-
-    def __init__(self, workers: int, scheduler: str | None):
-        self.workers, self.scheduler, self.cluster = workers, scheduler, None
-
-    def __enter__(self):
-        import logging
-
-        from distributed import Client, LocalCluster
-
-        if self.scheduler:
-            try:
-                self.client = Client(self.scheduler, timeout=30)
-            except OSError as exc:
-                raise InputError(f"--scheduler {self.scheduler}: cannot connect ({exc})") from None
-        else:
-            self.cluster = LocalCluster(n_workers=max(self.workers, 1), threads_per_worker=1, processes=True,
-                                        dashboard_address=":0", silence_logs=logging.ERROR)
-            self.client = Client(self.cluster)
-        return self.client
-
-    def __exit__(self, *exc):
-        self.client.close()
-        if self.cluster is not None:
-            self.cluster.close()

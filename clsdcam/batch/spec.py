@@ -45,6 +45,7 @@ class BatchSummary:
     computed_frames: int
     failed: list[tuple[int, str]] = field(default_factory=list)
     seconds: float = 0.0
+    layout: str = ""  # where the frames ran, e.g. "2 workers × 1 thread on 2 cores"
 
     @property
     def exit_code(self) -> int:

@@ -180,8 +180,9 @@ def cached_solver(calibration: str, preprocessing: Preprocessing, settings: Sett
 
 def _worker_device(backend: str, device: str | None):
     """``--device`` if given, else PYOPENCL_CTX if set (the way to pin one device per worker), else,
-    on a worker named by an integer n (LocalCluster's are 0…N−1), GPU number n mod the GPU count."""
-    if device or backend != "opencl" or os.environ.get("PYOPENCL_CTX"):
+    for ``opencl`` or ``auto`` on a worker named by an integer n (LocalCluster's are 0…N−1), GPU number
+    n mod the GPU count (none: the backend chooses, ``auto`` NumPy)."""
+    if device or backend == "numpy" or os.environ.get("PYOPENCL_CTX"):
         return device
     try:
         from distributed import get_worker
@@ -191,5 +192,8 @@ def _worker_device(backend: str, device: str | None):
         return None
     from ..backends.cl_devices import _all_devices, import_pyopencl
 
-    gpus = [d for _, d in _all_devices() if d.type & import_pyopencl().device_type.GPU]
+    try:
+        gpus = [d for _, d in _all_devices() if d.type & import_pyopencl().device_type.GPU]
+    except InputError:  # no OpenCL here: ``auto`` becomes NumPy, ``opencl`` says why when its backend is built
+        return None
     return gpus[n % len(gpus)] if gpus else None

@@ -1,15 +1,21 @@
 """The ``clsdcam`` command line: one module per command (``add_parser`` and ``run``), shared options and
 argument types in :mod:`clsdcam.cli.options`, every heavy import inside a command's ``run``.
 
-Exit codes: 0 success, 2 bad input (one line on stderr, no traceback, no output file),
-130 interrupted (no partial output file).
+Exit codes: 0 success, 2 bad input (one line on stderr, no traceback, no output file; a file or folder that
+cannot be read or written is bad input too), 130 interrupted (no partial output file).
 """
 from __future__ import annotations
 
+import errno
 import os
 import sys
 
+from ..data import data_folder
 from ..errors import InputError
+
+# file-system errors that say something about a path the user gave (exit 2), not about clsdcam
+PATH_ERRORS = frozenset({errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOTDIR, errno.EISDIR, errno.EEXIST,
+                         errno.ENOENT, errno.ENOSPC, errno.EDQUOT, errno.ENAMETOOLONG})
 
 
 class PipeGuard:
@@ -62,10 +68,22 @@ def _main(argv) -> int:
         args = parser.parse_args(argv)
         if args.command is None:
             raise InputError("a command is needed: " + ", ".join(commands()) + " (clsdcam --help says what each does)")
-        return command_module(args.command).run(args)
+        with data_folder(getattr(args, "data", None)):
+            return command_module(args.command).run(args)
     except InputError as exc:
         print(f"clsdcam: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        if exc.errno not in PATH_ERRORS:
+            raise
+        print(f"clsdcam: error: {path_error_text(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("clsdcam: interrupted; no output written", file=sys.stderr)
         return 130
+
+
+def path_error_text(exc: OSError) -> str:
+    """One line for a file-system error: the path and what went wrong."""
+    path = f"{exc.filename}: " if exc.filename else ""
+    return f"{path}{exc.strerror or exc}"

@@ -15,7 +15,7 @@ EXAMPLES = examples(
 
 
 def add_parser(subparsers):
-    from ..settings import COLD_ITERS
+    from ..settings import COLD_ITERS, DEFAULT_ITERS
 
     p = subparsers.add_parser("batch", help="reconstruct many frames (warm-started streams on Dask workers)",
                               description="Reconstruct many frames: warm-started streams, on Dask workers; a "
@@ -26,14 +26,16 @@ def add_parser(subparsers):
     p.add_argument("-o", "--output", required=True, help="OUT.h5 (parts in OUT.h5.parts/)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=integer_at_least(0), default=1,
-                       help="worker processes of an embedded Dask LocalCluster (0: one in-process stream)")
+                       help="worker processes of an embedded Dask LocalCluster, at most one per core, each with "
+                            "cores / workers threads (0: one in-process stream on all cores)")
     where.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
     p.add_argument("--chunk", type=positive_int, default=None,
                    help="frames per task (default: missing frames / workers, at most 64: each chunk's first frame "
                         "is a cold start)")
     p.add_argument("--cold-iters", type=positive_int, default=None,
                    help=f"iterations of a cold start (a chunk's first frame); --iters is the budget of the "
-                        f"warm-started frames after it (default: {COLD_ITERS} or --iters, the larger)")
+                        f"warm-started frames after it (default: the larger of {COLD_ITERS} and --iters, so "
+                        f"{DEFAULT_ITERS} with the default --iters)")
     p.add_argument("--no-warm-start", action="store_true", help="start every frame from zero (each with --iters)")
     p.add_argument("--overwrite", action="store_true", help="recompute everything (default: only the missing frames)")
     add_solver_options(p)
@@ -52,7 +54,7 @@ def run(args) -> int:
         return 130
     rate = summary.computed_frames / summary.seconds if summary.seconds else 0.0
     print(f"wrote {args.output}: {summary.n_frames} frames ({summary.computed_frames} computed now, "
-          f"{rate:.2f} frames/s), {len(summary.failed)} failed")
+          f"{rate:.2f} frames/s, on {summary.layout}), {len(summary.failed)} failed")
     for index, reason in summary.failed:
         print(f"  frame {index}: {reason}", file=sys.stderr)
     return summary.exit_code
@@ -62,22 +64,25 @@ def _run_batch(args):
     """run_batch as the options ask, with a progress bar unless --quiet."""
     from ..batch import BatchSpec, run_batch
     from .options import preprocessing_from, settings_from
+    from .solve import chosen_backend
 
     spec = BatchSpec(frames=tuple(args.frames), calibration=args.calibration, preprocessing=preprocessing_from(args),
-                     settings=settings_from(args), backend=args.backend, device=args.device, fft=args.fft,
+                     settings=settings_from(args), backend=chosen_backend(args), device=args.device, fft=args.fft,
                      path=args.path, warm_start=not args.no_warm_start, cold_iters=args.cold_iters)
     bars = []
     try:
         return run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,
                          overwrite=args.overwrite, progress=lambda k: bars and bars[0].update(k),
-                         on_plan=None if args.quiet else lambda n, missing: bars.append(_bar(n, n - missing)))
+                         on_plan=None if args.quiet else lambda n, missing, layout: bars.append(_bar(n, n - missing, layout)))
     finally:
         for bar in bars:
             bar.close()
 
 
-def _bar(total: int, done: int):
-    """One bar over all frames (those done by an earlier run already counted); tqdm shows frames/s and ETA."""
+def _bar(total: int, done: int, layout):
+    """One bar over all frames (those done by an earlier run already counted), headed by where they run
+    (``layout``); tqdm shows frames/s and ETA."""
     from tqdm import tqdm
 
-    return tqdm(total=total, initial=done, unit="frame", file=sys.stderr, dynamic_ncols=True, smoothing=0.1)
+    return tqdm(total=total, initial=done, unit="frame", file=sys.stderr, dynamic_ncols=True, smoothing=0.1,
+                desc=str(layout))

@@ -22,9 +22,13 @@ def run(args) -> int:
     import json
 
     from ..devcheck import as_json, check, passed, table
+    from ..io import atomic_output, check_output
 
+    if args.json:
+        check_output(args.json, "--json")
     rows = check(args.device, progress=lambda section: print(f"checking {section} …", file=sys.stderr, flush=True))
     print(table(rows))
     if args.json:
-        args.json.write_text(json.dumps(as_json(rows), indent=2) + "\n")
+        with atomic_output(args.json) as tmp:
+            tmp.write_text(json.dumps(as_json(rows), indent=2) + "\n")
     return 0 if passed(rows) else 1

@@ -1,16 +1,21 @@
-"""``clsdcam devices``: the OpenCL platforms and devices."""
+"""``clsdcam devices``: the OpenCL platforms and devices, and what ``--backend auto`` chooses among them."""
 from __future__ import annotations
+
+from argparse import Namespace
 
 from .options import examples
 
 
 def add_parser(subparsers):
-    subparsers.add_parser("devices", help="list OpenCL platforms and devices (memory, compute units, fp64)",
+    subparsers.add_parser("devices", help="list OpenCL platforms and devices (memory, compute units, fp64) and the "
+                                          "backend --backend auto (the default) chooses",
                           epilog=examples("clsdcam devices", "PYOPENCL_CTX=0 clsdcam devices"))
 
 
 def run(args) -> int:
     from ..backends.cl_devices import format_devices
+    from .solve import chosen_backend
 
     print(format_devices())
+    chosen_backend(Namespace(backend="auto", device=None))
     return 0

@@ -19,6 +19,10 @@ HELPERS = ("options", "solve")       # modules of this package that are not comm
 SCENES = ("target", "leds", "lines", "piecewise", "points", "sources", "realcube")   # clsdcam.sim.SCENES (tested)
 
 
+OUTPUTS = ("output", "outdir", "png", "json")   # the destinations of options that name where a command writes
+CREATES_FOLDERS = "missing folders are created when it is written"
+
+
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
     """Epilogs kept as written (worked examples); every option's default shown unless its help says it."""
 
@@ -31,7 +35,8 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse that reports a usage error as an InputError (one line, exit 2) and shows defaults and examples."""
+    """argparse that reports a usage error as an InputError (one line, exit 2), shows defaults and examples, and
+    says where a command's outputs create folders."""
 
     def __init__(self, *args, **kwargs):
         kwargs.setdefault("formatter_class", HelpFormatter)
@@ -39,6 +44,14 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message):
         raise InputError(message)
+
+    def add_argument(self, *args, **kwargs):
+        """argparse's, but the help of an argument that names where a command writes (OUTPUTS) says that missing
+        folders are created (CREATES_FOLDERS)."""
+        action = super().add_argument(*args, **kwargs)
+        if action.dest in OUTPUTS:
+            action.help = f"{action.help or 'where to write'} ({CREATES_FOLDERS})"
+        return action
 
 
 def examples(*lines: str) -> str:
@@ -102,9 +115,34 @@ def size(minimum: int = 1):
     return parse
 
 
+def existing_folder(text: str) -> str:
+    """An argparse type: a path that is an existing folder."""
+    from pathlib import Path
+
+    if not Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: no such folder")
+    return text
+
+
 # ---- option groups --------------------------------------------------------------------------------------
+DATA_OPTION = ("--data", dict(
+    type=existing_folder, default=None, metavar="DIR",
+    help="the shared data folder (real cubes, measured PSFs, lamp spectra; default: $CLSDCAM_DATA, else the first "
+         "shared/data in the working folder or a folder above it, e.g. ../shared/data from a clone beside it, else "
+         "beside the package's clone)"))
+
+
+def add_data_option(p: argparse.ArgumentParser):
+    """``--data DIR``: the shared data folder (:mod:`clsdcam.data`) for the commands that read it."""
+    flag, keywords = DATA_OPTION
+    p.add_argument(flag, **keywords)
+
+
 def add_backend_options(p: argparse.ArgumentParser):
-    p.add_argument("--backend", default="numpy", choices=("numpy", "opencl"), help="numpy (reference) or opencl")
+    p.add_argument("--backend", default="auto", choices=("auto", "numpy", "opencl"),
+                   help="auto: opencl on an OpenCL GPU when one is found (or on --device when given), else numpy, "
+                        "saying which; a CPU's OpenCL device (PoCL) only when opencl is named: no faster than numpy, "
+                        "the reference (docs/benchmarks.md)")
     p.add_argument("--device", default=None,
                    help="OpenCL device: substring of platform or device name (default: PYOPENCL_CTX, else a GPU, else a CPU)")
     p.add_argument("--path", default="auto", choices=("auto", "host", "device"),
@@ -179,6 +217,7 @@ def add_measurement_options(p: argparse.ArgumentParser, average: bool = True):
 
 
 def add_simulation_options(p: argparse.ArgumentParser):
+    """The simulated camera and scene: scene, seed, noise, size, bands, and the shared data folder (``realcube``)."""
     from ..prototype import N_BANDS, SENSOR_SHAPE
 
     p.add_argument("--scene", default="target", choices=SCENES, metavar="SCENE",
@@ -188,6 +227,7 @@ def add_simulation_options(p: argparse.ArgumentParser):
     p.add_argument("--size", type=size(), default=SENSOR_SHAPE, metavar="HxW",
                    help=f"sensor size (default {SENSOR_SHAPE[0]}x{SENSOR_SHAPE[1]})")
     p.add_argument("--bands", type=positive_int, default=N_BANDS, help=f"number of bands (default {N_BANDS})")
+    add_data_option(p)
 
 
 # ---- the parser -----------------------------------------------------------------------------------------

@@ -22,7 +22,7 @@ def add_parser(subparsers):
         "clsdcam simulate small/ --scene leds --size 64x96 --bands 16 --noise 1e-4",
         "clsdcam simulate video/ --scene leds --frames 16 --drift 0.3,0.6",
         "clsdcam simulate lab/ --sweep --size 48x64 --bands 16   # + a monochromator sweep to calibrate from"))
-    p.add_argument("outdir")
+    p.add_argument("outdir", help="the folder to write into")
     p.add_argument("--frames", type=positive_int, default=None,
                    help="write a video of N frames of the scene drifting (frames.npy, truth.h5)")
     p.add_argument("--drift", type=drift_pair, default=None, metavar="DY,DX",
@@ -35,10 +35,12 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
+    from ..io import check_folder
     from ..sim import simulate, write_simulation
 
     if args.frames and args.sweep:
         raise InputError("--sweep and --frames: choose one")
+    check_folder(args.outdir, f"output folder {args.outdir}")
     if args.frames:
         return _simulate_video(args)
     if args.sweep:

@@ -1,5 +1,6 @@
-"""One reconstruction from the command line: the solver with a progress bar, the cube and pictures written,
-the report and the accuracy printed (shared by ``reconstruct`` and ``demo``)."""
+"""One reconstruction from the command line: the backend chosen, the solver with a progress bar, the cube and
+pictures written, the report and the accuracy printed (shared by ``reconstruct`` and ``demo``; ``batch`` shares the
+backend's choice)."""
 from __future__ import annotations
 
 import sys
@@ -14,8 +15,8 @@ def solve(args, calibration, measurement, snapshots=()):
     """Build the solver and run it with a progress bar; Ctrl-C without --save-on-interrupt propagates."""
     from ..solver import Solver
 
-    solver = Solver(calibration, backend=args.backend, device=args.device, settings=settings_from(args), fft=args.fft,
-                    path=args.path)
+    solver = Solver(calibration, backend=chosen_backend(args), device=args.device, settings=settings_from(args),
+                    fft=args.fft, path=args.path)
     be = solver.backend
     if not args.quiet:
         print(f"backend {be.name} on {be.device_name} ({be.path} path, FFT: {be.fft_engine}); field "
@@ -27,19 +28,37 @@ def solve(args, calibration, measurement, snapshots=()):
     return result
 
 
+def chosen_backend(args) -> str:
+    """The backend ``--backend`` names; for ``auto`` (the default) its choice
+    (:func:`clsdcam.backends.resolve_backend`), said in one line: ``backend: opencl on DEVICE (auto: a GPU was
+    found)`` or ``backend: numpy (auto: no OpenCL GPU)``."""
+    from ..backends import resolve_backend
+
+    name, why = resolve_backend(args.backend, args.device)
+    if why:
+        where = ""
+        if name == "opencl":
+            from ..backends.cl_devices import choose_device, describe
+
+            where = f" on {describe(choose_device(args.device))}"
+        print(f"backend: {name}{where} (auto: {why})")
+    return name
+
+
 def write(args, result, truth=None) -> int:
-    """Save the cube (and pictures unless interrupted); 130 after an interrupted run, else 0."""
+    """Save the cube and, with --png, its pictures (after a Ctrl-C with --save-on-interrupt too: of the best cube so
+    far, the one saved); 130 after an interrupted run, else 0."""
     result.save(args.output)
-    interrupted = result.stop_reason == "interrupted"
-    if args.png and not interrupted:
+    if args.png:
         from ..render import save_pictures
 
         paths = save_pictures(args.png, result.cube, result.wavelengths, history=result.history, truth=truth)
         print("pictures: " + ", ".join(str(p) for p in paths))
     report(result, Path(args.output))
-    if interrupted:
+    if result.stop_reason == "interrupted":
+        pictures = f" and its pictures to {args.png}_*.png" if args.png else ""
         print(f"clsdcam: interrupted after {result.iterations} iterations; wrote the best cube so far to "
-              f"{args.output}", file=sys.stderr)
+              f"{args.output}{pictures}", file=sys.stderr)
         return 130
     return 0
 
@@ -47,7 +66,10 @@ def write(args, result, truth=None) -> int:
 LOG_EVERY = 10.0    # seconds between progress lines when stderr is not a terminal (a log file, a pipe)
 POOR_FIT = 0.1      # ‖Av − b‖/‖b‖ above this after a solve: the cube does not explain the measurement, …
 NOT_NOISE = 6.0     # … unless the residual is noise: rms(r)/σ̂(r) of 1.0–4.0 on the six simulated scenes, 8.6–18.8 with
-                    # another camera's calibration (Solver._residual_figures)
+                    # another camera's calibration (Solver._residual_figures), …
+TAIL = 10           # … or the solve was cut short: the data term's fall over its last TAIL iterations …
+LEVELLED = 0.1      # … is LEVELLED or more (leds, target: 62–93% after 5 to 14 iterations with the right calibration at
+                    # 64×96×16 and 320×448×64; 1.1–5.7% after 60 with another camera's, 32×40×4 to 320×448×64)
 
 
 class ProgressBar:
@@ -110,8 +132,37 @@ def report(result, output: Path):
     print(f"fit: ‖Av − b‖/‖b‖ = {100 * fit:.2g}% (the part of the measurement the cube does not explain), "
           f"{structure:.2g}× the noise level")
     if fit > POOR_FIT and structure > NOT_NOISE:
-        print(f"clsdcam: warning: the cube leaves {100 * fit:.0f}% of the measurement unexplained: is the calibration "
-              "the camera's, with the measurement's crop and orientation?", file=sys.stderr)
+        print(poor_fit_warning(result, fit), file=sys.stderr)
+
+
+def poor_fit_warning(result, fit: float) -> str:
+    """The one-line warning for a cube that leaves ``fit`` = ‖Av − b‖/‖b‖ of the measurement unexplained, beyond
+    noise: a solve cut short (by --iters or Ctrl-C) while the data term was still falling by LEVELLED or more over
+    its last TAIL iterations is told to run longer; a fit that had levelled off puts the calibration in doubt."""
+    fall = data_fall(result.history)
+    unexplained = f"clsdcam: warning: the cube leaves {100 * fit:.0f}% of the measurement unexplained"
+    if fall is not None and fall < LEVELLED:
+        return f"{unexplained}: is the calibration the camera's, with the measurement's crop and orientation?"
+    how = "was interrupted" if result.stop_reason == "interrupted" else "stopped"
+    trend = "" if fall is None else \
+        f" (½‖Ay − b‖² fell {100 * fall:.0f}% over its last {tail(result.history)} iterations)"
+    return (f"{unexplained}, but the solve {how} after {result.iterations} iterations with the fit still improving"
+            f"{trend}: run more iterations (--iters) before judging the calibration")
+
+
+def tail(history: list[dict]) -> int:
+    """k = min(TAIL, n − 1): the iterations over which :func:`data_fall` reads the trend of n recorded ones."""
+    return min(TAIL, len(history) - 1)
+
+
+def data_fall(history: list[dict]) -> float | None:
+    """1 − d_n / d_(n−k) of the recorded data term d = ½‖Ay − b‖² over the last k = :func:`tail` iterations
+    (negative when it rose); None before a second iteration (no trend yet)."""
+    k = tail(history)
+    if k < 1:
+        return None
+    before = history[-1 - k]["data"]
+    return 1.0 - history[-1]["data"] / before if before > 0 else 0.0
 
 
 def print_accuracy(cube, truth, label=""):

@@ -11,11 +11,12 @@ One module a part: :mod:`.spectra` (band wavelengths, band averages, analytic sp
 :mod:`.video` (a drifting scene, one frame per step). The names the rest of clsdcam uses are
 importable from here.
 """
+from ..data import shared_data_dir
 from .camera import Simulation, add_noise, noiseless_measurement, simulate, write_simulation
 from .caustic import autocorrelation, autocorrelation_halfwidth, caustic_psf
 from .filters import filter_array
 from .lenses import DESIGNS, SUPERPIXEL_PX, lens_psf
-from .scenes import SCENES, make_scene, shared_data_dir
+from .scenes import SCENES, make_scene
 from .sensor import DEFAULT_SHAPE
 from .spectra import band_average, band_wavelengths, gaussian_line
 from .video import simulate_video, write_video

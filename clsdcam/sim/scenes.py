@@ -11,7 +11,6 @@ interpolated to the band wavelengths. Every scene is scaled to peak 1; random ch
 """
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 from typing import Callable
@@ -20,6 +19,7 @@ import numpy as np
 import scipy.ndimage as ndi
 from scipy.interpolate import interp1d
 
+from ..data import missing_text, shared_data_dir
 from ..errors import InputError
 from .sensor import DEFAULT_SHAPE
 from .spectra import band_average, band_wavelengths, blackbody, gaussian_line
@@ -212,11 +212,6 @@ def sources_scene(shape, wavelengths, _rng: np.random.Generator) -> np.ndarray:
     return source_cube(shape, wavelengths)
 
 
-def shared_data_dir() -> Path:
-    """``$CLSDCAM_DATA`` when set, else ``../shared/data`` beside the repository."""
-    return Path(os.environ.get("CLSDCAM_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))
-
-
 def envi_wavelengths(header: Path) -> np.ndarray:
     """The ``wavelength = { … }`` list of an ENVI header (nm)."""
     match = re.search(r"wavelength\s*=\s*\{([^}]*)\}", header.read_text())
@@ -248,7 +243,7 @@ def realcube_scene(shape, wavelengths, _rng: np.random.Generator) -> np.ndarray:
     window's aspect and zoomed (bilinear) onto the inner window; negative raw values clipped to 0 (not random)."""
     path = shared_data_dir() / SAMSON
     if not path.exists():
-        raise InputError(f"scene 'realcube' needs ../shared/data/{SAMSON} (or $CLSDCAM_DATA/{SAMSON}); not present")
+        raise InputError(f"scene 'realcube': {missing_text(SAMSON)}")
     raw, source_nm = read_samson(path)
     box = inner_shape(shape)
     cropped = central_crop(raw, box[1] / box[0])

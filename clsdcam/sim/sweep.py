@@ -11,7 +11,7 @@ source at relative power p_i = P(λ_i) / max_j P(λ_j), in counts of 1 e⁻ each
 with g such that the brightest pixel of the sweep collects PEAK_COUNTS (:func:`sweep_of` makes these frames of any
 response R, e.g. measured filter curves on a filter layout). P is the Cornerstone monochromator's
 measured power (``spectra/spectraldiffuserscope/cornerstone_power_20240223.csv`` under
-:func:`.scenes.shared_data_dir`) when present, else a smooth lamp-like curve; the simulator interpolates it
+:func:`clsdcam.data.shared_data_dir`) when present, else a smooth lamp-like curve; the simulator interpolates it
 linearly, as ``calibrate filters`` does. N_DARK dark frames are DARK + read noise.
 
 The camera the sweep calibrates has the true filters of K equal bands over the prototype's 386–898 nm:
@@ -33,11 +33,11 @@ import numpy as np
 
 from ..calibrate.bands import equal_edges, integrate_bands
 from ..calibration import Calibration
+from ..data import missing_text, shared_data_dir
 from ..io import atomic_output
 from ..prototype import SPECTRAL_RANGE
 from .camera import Simulation, resolve_geometry, simulate, write_simulation
 from .filters import filter_array
-from .scenes import shared_data_dir
 
 SWEEP_NM = (370.0, 898.0, 2.0)     # start, stop (included), step
 DARK, READ = 400.0, 3.0            # counts: dark level, read-noise rms
@@ -64,14 +64,15 @@ def sweep_grid() -> np.ndarray:
 
 def power_table() -> tuple[np.ndarray, str]:
     """(wavelength nm, power) rows and where they came from: the Cornerstone CSV, else a smooth curve
-    P(λ) = 2 + 3 exp(−((λ − 470)/150)²) µW every 10 nm over 350–900 nm."""
+    P(λ) = 2 + 3 exp(−((λ − 470)/150)²) µW every 10 nm over 350–900 nm (and why the CSV was not used)."""
     path = shared_data_dir() / CORNERSTONE
     if path.exists():
         from ..calibrate.tables import read_table
 
         return read_table(path, "power", 2), str(path)
     lam = np.arange(350.0, 901.0, 10.0)
-    return np.stack([lam, 2.0 + 3.0 * np.exp(-((lam - 470.0) / 150.0) ** 2)], axis=1), "synthetic"
+    curve = np.stack([lam, 2.0 + 3.0 * np.exp(-((lam - 470.0) / 150.0) ** 2)], axis=1)
+    return curve, f"a smooth lamp-like curve, {missing_text(CORNERSTONE)}"
 
 
 def simulate_sweep(shape, seed: int = 0) -> SweepSimulation:
