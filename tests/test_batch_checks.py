@@ -157,13 +157,12 @@ def test_host_threads_come_from_clsdcam_threads_or_the_cores(monkeypatch):
 def threads_seen_by_a_chunk(calibration: str, shape):
     """On a worker, as ``_dask_chunk`` runs a chunk: (its solver's host threads, BLAS threads, pocl's setting,
     glibc's trim threshold)."""
-    import os
-
     with workers.chunk_threads():
         solver, _ = stream.cached_solver(calibration, Preprocessing(), Settings(iters=1), "numpy", None, "auto",
                                          "auto", shape)
         blas = [i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
-        return solver.backend.workers, blas, os.environ.get("POCL_MAX_PTHREAD_COUNT"), os.environ.get(workers.MALLOC_TRIM)
+        environ = os.environ.get
+        return solver.backend.workers, blas, environ("POCL_MAX_PTHREAD_COUNT"), environ(workers.MALLOC_TRIM)
 
 
 def test_the_chosen_threads_reach_each_worker(video, monkeypatch):
@@ -204,8 +203,8 @@ def test_auto_workers_take_one_gpu_each_and_numpy_without_opencl(monkeypatch):
     monkeypatch.delenv("PYOPENCL_CTX", raising=False)
     monkeypatch.setattr(distributed, "get_worker", lambda: type("Worker", (), {"name": "3"})())
     monkeypatch.setattr(cl_devices, "import_pyopencl", lambda: type("cl", (), {"device_type": Types})())
-    monkeypatch.setattr(cl_devices, "_all_devices", lambda: [(0, gpus[0]), (1, type("Device", (), {"type": Types.CPU})()),
-                                                             (2, gpus[1])])
+    cpu = type("Device", (), {"type": Types.CPU})()
+    monkeypatch.setattr(cl_devices, "_all_devices", lambda: [(0, gpus[0]), (1, cpu), (2, gpus[1])])
     assert stream._worker_device("auto", None) is gpus[1] and stream._worker_device("opencl", None) is gpus[1]
     assert stream._worker_device("numpy", None) is None and stream._worker_device("auto", "gfx") == "gfx"
 

@@ -59,7 +59,8 @@ def _timed_batch(spec, output: Path, workers: int) -> dict:
     after = [resource.getrusage(who) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
     with h5py.File(output, "r") as f:
         solve, iterations = float(np.mean(f["seconds"][...])), int(np.sum(f["iterations"][...]))
-    return {"seconds": wall, "frames_per_s": summary.n_frames / wall, "solve_s_per_frame": solve, "iterations": iterations,
+    return {"seconds": wall, "frames_per_s": summary.n_frames / wall, "solve_s_per_frame": solve,
+            "iterations": iterations,
             "user_s": sum(a.ru_utime - b.ru_utime for a, b in zip(after, before)),
             "system_s": sum(a.ru_stime - b.ru_stime for a, b in zip(after, before)), "layout": summary.layout}
 

@@ -66,7 +66,7 @@ def plan_workers(workers: int, scheduler: str | None = None, cores: int | None =
 def _spawning_without_malloc_trim():
     """While worker processes start: neither Dask's pre-spawn environment nor this process's (restored after)
     holds ``MALLOC_TRIM_THRESHOLD_``. Set at all, it turns off glibc's adaptive mmap threshold, so every large
-    temporary array is mapped and unmapped afresh and its pages faulted in again (40–45 % of a worker's CPU
+    temporary array is mapped and unmapped afresh and its pages faulted in again (about 40 % of the workers' CPU
     time went to the kernel, docs/batch.md)."""
     import dask
 

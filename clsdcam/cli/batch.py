@@ -73,7 +73,8 @@ def _run_batch(args):
     try:
         return run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,
                          overwrite=args.overwrite, progress=lambda k: bars and bars[0].update(k),
-                         on_plan=None if args.quiet else lambda n, missing, layout: bars.append(_bar(n, n - missing, layout)))
+                         on_plan=None if args.quiet else lambda n, missing, layout: bars.append(
+                             _bar(n, n - missing, layout)))
     finally:
         for bar in bars:
             bar.close()
