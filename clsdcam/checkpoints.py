@@ -2,7 +2,8 @@
 
 * monotone checkpoints (as MFISTA): every ``objective_every`` iterations F(x) is evaluated; the best iterate is
   kept, and a rise (beyond round-off, 64·eps·|F|) sends the algorithm back to it (``reset``: momentum afresh),
-  so the recorded objective never increases;
+  so the recorded objective never increases (an algorithm whose ``monotone`` is False, as ADMM's, is never rolled
+  back on a rise: its best iterate is kept all the same, for Ctrl-C);
 * step back-off: a non-finite value, a data term f above 10³·F(best), or a checkpoint right after a rollback
   that does not lower F beyond round-off halves the step before going back to the best iterate. From the best
   point with the momentum reset, a proximal-gradient step ≤ 1/L lowers F; when it does not, the step is too long
@@ -73,6 +74,8 @@ class Checkpoints:
             return {"objective": value}
         if self.rolled_back or not math.isfinite(value):
             return {**self.back_off(), "objective": self.best_objective}
+        if not getattr(self.algorithm, "monotone", True):      # its F may rise on the way (ADMM): kept, not undone
+            return {"objective": value}
         self.rolled_back = True
         self.algorithm.reset(self.best)
         return {"rollback": True, "objective": self.best_objective}

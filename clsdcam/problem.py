@@ -11,12 +11,15 @@ from __future__ import annotations
 
 from typing import Callable
 
+from .errors import InputError
+
 
 class Problem:
     """The data term through ``model`` and the prior through ``prox`` / ``penalty``, for one normalised b;
     ``subspace`` (a :class:`~clsdcam.subspace.SpectralSubspace`) when x holds its coefficients."""
 
-    def __init__(self, model, b, prox: Callable, penalty: Callable, rank: int, subspace=None):
+    def __init__(self, model, b, prox: Callable, penalty: Callable, rank: int, subspace=None,
+                 splitting: Callable | None = None):
         self.model = model
         self.backend = model.backend
         self.b = b
@@ -25,6 +28,7 @@ class Problem:
         self.rank = rank
         self.subspace = subspace
         self.residual_buffer = self.backend.empty(model.sensor_shape)
+        self._splitting = splitting      # () -> clsdcam.splitting.Splitting: ADMM's closed-form steps (band space)
 
     def gradient_step(self, y, out, step: float) -> float:
         """out = y − step·A_sᵀ(A_s y − b) (fused in the adjoint); returns f(y) = ½‖A_s y − b‖²."""
@@ -57,6 +61,13 @@ class Problem:
             return x
         cube = self.subspace.expand(x)
         return self.backend.nonneg(cube, out=cube)
+
+    def splitting(self):
+        """ADMM's closed-form steps for this problem (:class:`clsdcam.splitting.Splitting`); InputError where the
+        space has none."""
+        if self._splitting is None:
+            raise InputError("--algorithm admm runs in band space: no --subspace or --rank")
+        return self._splitting()
 
     def transforms(self) -> int:
         """2-D FFTs per gradient step."""

@@ -10,6 +10,7 @@ import numpy as np
 
 from .priors import ProxAverage
 from .problem import Problem
+from .splitting import Splitting, band_splitting
 from .subspace import SpectralSubspace
 
 
@@ -49,7 +50,11 @@ class Spaces:
     def band(self) -> Problem:
         """The problem on the band cube (the full problem)."""
         average = ProxAverage(self.backend, self.priors, self.model.cube_shape)
-        return Problem(self.model, self.b, average.prox, average.value, self.n_bands)
+        return Problem(self.model, self.b, average.prox, average.value, self.n_bands, splitting=self.splitting)
+
+    def splitting(self) -> Splitting:
+        """ADMM's closed-form steps for band space (TV and L1 priors only)."""
+        return band_splitting(self.model, self.b, self.filters, self.priors)
 
     def subspace(self, basis: np.ndarray, start=None) -> Problem:
         """The problem on ``basis`` (its L by a power iteration from ``start``, unless the last basis was the same)."""

@@ -54,8 +54,8 @@ def test_momentum_sequence():
 
 
 def test_an_unknown_algorithm_is_refused():
-    with pytest.raises(InputError, match="--algorithm 'admm': expected one of fista"):
-        Settings(algorithm="admm")
+    with pytest.raises(InputError, match="--algorithm 'sirt': expected one of fista, admm"):
+        Settings(algorithm="sirt")
 
 
 def test_a_plugged_in_algorithm_runs_in_both_spaces(pgm, backend, leds):

@@ -154,6 +154,16 @@ def test_auto_chooses_an_opencl_gpu_and_says_which(scenes, tmp_path, monkeypatch
     assert asked == ["opencl"]
 
 
+def test_auto_runs_admm_on_numpy_even_with_a_gpu(scenes, tmp_path, monkeypatch, capsys):
+    """ADMM has no OpenCL kernels yet: ``--backend auto`` takes NumPy for it, says why, and solves."""
+    fake_opencl(monkeypatch, "GPU")
+    assert reconstruct(scenes, "small", "small", tmp_path / "a.h5", "--iters", "3", "--algorithm", "admm",
+                       "--quiet") == 0
+    assert "backend: numpy (auto: --algorithm admm runs on NumPy)\n" in capsys.readouterr().out
+    with h5py.File(tmp_path / "a.h5", "r") as f:
+        assert f.attrs["algorithm"] == "admm" and f.attrs["backend"] == "numpy" and f.attrs["iterations"] == 3
+
+
 @pytest.mark.parametrize("kinds", [(), ("CPU",)])
 def test_auto_leaves_cpu_opencl_devices_opt_in(monkeypatch, kinds):
     fake_opencl(monkeypatch, *kinds)

@@ -23,12 +23,13 @@ def test_bench_iteration_times_every_configuration_against_the_authors_and_the_f
     result = json.loads(out.read_text())
     assert set(result["seconds"]) == {"numpy full solver (--no-skip)", "numpy --subspace --support-field (automatic rank)",
                                       "numpy default (paper field, 8 bands)", "numpy --support-field (8 bands)",
-                                      "numpy subspace r = 2", bench_iteration.AUTHORS}
+                                      "numpy subspace r = 2", "numpy --algorithm admm (paper field, 8 bands)",
+                                      bench_iteration.AUTHORS}
     assert all(len(samples) == 2 and min(samples) > 0 for samples in result["samples"].values())
     assert result["fields"]["numpy full solver (--no-skip)"] == [48, 64]
     assert set(result["fft_floor"]) == {bench_iteration.PAPER, bench_iteration.OWN}
     table = capsys.readouterr().out
-    assert table.count("\n| numpy") == 5 and "FFT floor, paper field" in table
+    assert table.count("\n| numpy") == 6 and "FFT floor, paper field" in table
 
 
 def test_bench_recon_writes_its_tables_curves_and_plot(tmp_path, capsys):
@@ -94,6 +95,18 @@ def test_bench_accuracy_compares_the_default_with_the_full_solver_the_sweep_and_
     assert len(rank_rows) == 3                              # the automatic rule, the full solver, the fixed rank
     alone = {"scenes": {"target": {name: results["target"][name] for name in ("default", "--no-skip")}}}
     assert bench_accuracy.markdown(alone, [5, 20]).count("\n") == 3      # no sweep or rank table without their runs
+
+
+def test_bench_accuracy_runs_another_algorithm_on_the_scenes_and_the_hand(tmp_path, shared_data):
+    """``--algorithms admm``: a run of its own on every scene and on the hand (correlated with the reference)."""
+    shared_data(bench_accuracy.HAND[1])
+    bench_accuracy.main(["--scenes", "target", "--size", "24x32", "--bands", "8", "--marks", "3", "--algorithms",
+                         "admm", "--hand", "--hand-reference-iters", "3", "--out", str(tmp_path)])
+    results = json.loads((tmp_path / "accuracy.json").read_text())
+    assert set(results["scenes"]["target"]) == {"default", "--no-skip", "--algorithm admm"}
+    (point,) = results["hand"]["runs"]["--algorithm admm"]["points"]
+    assert point["iteration"] == 3 and 0 < point["correlation"] <= 1
+    assert (tmp_path / "hand_admm.png").exists()
 
 
 def test_rank_signals_reads_the_default_band_iterate_and_its_largest_gaps(tmp_path, capsys):
@@ -188,6 +201,19 @@ def test_bench_panel_replays_one_scene_and_judges_a_speed_option(tmp_path, capsy
     text = capsys.readouterr().out
     assert "`--support-field` against `--no-skip`" in text and text.count("| sparse | 1 |") == 2
     assert "\n| 2 | sparse |" in text
+
+
+def test_bench_panel_judges_admm_at_a_third_of_the_iterations(tmp_path, capsys, monkeypatch):
+    """``--also 'algorithm admm'``: the same rule at every mark, and ADMM's mark m/3 against --no-skip's m."""
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    bench_panel.main(["--size", "24x32", "--bands", "8", "--scenes", "1", "--marks", "3,9", "--sweep", "0",
+                      "--seed", "7", "--also", "algorithm admm", "--out", str(tmp_path)])
+    (scene,) = json.loads((tmp_path / "panel.json").read_text())["scenes"]
+    admm, full = ({p["iteration"]: p for p in scene["runs"][name]["points"]} for name in ("--algorithm admm",
+                                                                                         "--no-skip"))
+    psnr_margin, _ = bench_panel.third_margins(scene, "--algorithm admm")
+    assert psnr_margin == pytest.approx(admm[3]["psnr"] - full[9]["psnr"] + bench_panel.PSNR_MARGIN_DB)
+    assert "`--algorithm admm` at a third of `--no-skip`'s iterations" in capsys.readouterr().out
 
 
 def test_the_projected_risk_of_a_row_space_error_is_its_whole_norm():

@@ -69,9 +69,15 @@ def source_peaks(cube, wavelengths) -> np.ndarray:
                      for y, x in source_positions(cube.shape[1:])])
 
 
-def run_configs(sweep, ranks) -> dict:
-    """Run name -> Settings fields: the default, the full solver, each fixed weight, each fixed rank."""
-    return {**CONFIGS, **{f"--tv {tv:g}": {"tv": tv} for tv in sweep}, **{f"--rank {r}": {"rank": r} for r in ranks}}
+def run_configs(sweep, ranks, algorithms=()) -> dict:
+    """Run name -> Settings fields: the default, the full solver, each other algorithm, each fixed weight, each fixed
+    rank."""
+    return {**CONFIGS, **algorithm_configs(algorithms), **{f"--tv {tv:g}": {"tv": tv} for tv in sweep},
+            **{f"--rank {r}": {"rank": r} for r in ranks}}
+
+
+def algorithm_configs(algorithms) -> dict:
+    return {f"--algorithm {name}": {"algorithm": name} for name in algorithms}
 
 
 def true_noise(sim) -> float:
@@ -81,10 +87,10 @@ def true_noise(sim) -> float:
     return float(np.std(sim.measurement - clean) / np.max(sim.measurement))
 
 
-def run_scene(scene: str, shape, bands: int, marks, sweep, ranks) -> dict:
+def run_scene(scene: str, shape, bands: int, marks, sweep, ranks, algorithms=()) -> dict:
     sim = simulate(scene=scene, shape=shape, n_bands=bands, seed=0)
     runs = {}
-    for name, fields in run_configs(sweep, ranks).items():
+    for name, fields in run_configs(sweep, ranks, algorithms).items():
         snapshots, attrs = solve(sim.calibration, sim.measurement, fields, marks)
         runs[name] = {"points": scene_points(scene, sim, snapshots), **attrs}
         if name == "default":
@@ -103,7 +109,7 @@ def binned(path: Path) -> np.ndarray:
     return bin_pixels(np.maximum(image - image[DARK_CORNER].mean(), 0.0), HAND_BIN)
 
 
-def run_hand(marks, sweep, reference_iters: int, reference_tv: float, out: Path) -> dict | None:
+def run_hand(marks, sweep, reference_iters: int, reference_tv: float, out: Path, algorithms=()) -> dict | None:
     """The hand (K = 1): correlation of each run's image with a long ``--no-skip`` run at ``reference_tv``;
     ``hand_<run>.png``: each run's image after the last mark, and the reference's."""
     from clsdcam.calibration import Calibration
@@ -117,11 +123,13 @@ def run_hand(marks, sweep, reference_iters: int, reference_tv: float, out: Path)
     reference = solve(calibration, raw, {"skip": False, "tv": reference_tv}, [reference_iters])[0][reference_iters]
     save_grey(out / "hand_reference.png", reference[0])
     runs = {}
-    for name, fields in {"default": {}, **{f"--tv {tv:g}": {"tv": tv} for tv in sweep}}.items():
+    for name, fields in {"default": {}, **algorithm_configs(algorithms),
+                         **{f"--tv {tv:g}": {"tv": tv} for tv in sweep}}.items():
         snapshots, attrs = solve(calibration, raw, fields, marks)
         runs[name] = {"points": [{"iteration": k, "correlation": float(np.corrcoef(c.ravel(), reference.ravel())[0, 1])}
                                  for k, c in sorted(snapshots.items())], **attrs}
-        save_grey(out / f"hand_{name.replace('--tv ', 'tv')}.png", snapshots[max(marks)][0])
+        save_grey(out / f"hand_{name.replace('--tv ', 'tv').replace('--algorithm ', '')}.png",
+                  snapshots[max(marks)][0])
     return {"reference": f"--no-skip --tv {reference_tv:g}, {reference_iters} iterations", "runs": runs}
 
 
@@ -237,6 +245,7 @@ def main(argv=None) -> int:
     parser.add_argument("--marks", default="50,100,300,500")
     parser.add_argument("--sweep", default="", help="fixed --tv weights to compare, e.g. 1e-4,3e-4,1e-3,3e-3")
     parser.add_argument("--ranks", default="", help="fixed --rank sizes to compare, e.g. 4,6,8,12")
+    parser.add_argument("--algorithms", default="", help="other algorithms to run beside FISTA, e.g. admm")
     parser.add_argument("--hand", action="store_true", help="also the real hand (K = 1) from ../shared/data")
     parser.add_argument("--hand-tv", type=float, default=1e-4, help="--tv of the hand's long --no-skip reference")
     parser.add_argument("--hand-reference-iters", type=int, default=1000)
@@ -244,14 +253,15 @@ def main(argv=None) -> int:
     marks = [int(m) for m in args.marks.split(",")]
     sweep = [float(t) for t in args.sweep.split(",") if t]
     ranks = [int(r) for r in args.ranks.split(",") if r]
+    algorithms = [a for a in args.algorithms.split(",") if a]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {"size": size_text(args.size), "bands": args.bands, "marks": marks, "scenes": {}}
-    for scene in args.scenes.split(","):
-        results["scenes"][scene] = run_scene(scene, args.size, args.bands, marks, sweep, ranks)
+    for scene in (s for s in args.scenes.split(",") if s):      # --scenes "": the hand alone
+        results["scenes"][scene] = run_scene(scene, args.size, args.bands, marks, sweep, ranks, algorithms)
         save_json(out, "accuracy", results)
     if args.hand:
-        results["hand"] = run_hand(marks, sweep, args.hand_reference_iters, args.hand_tv, out)
+        results["hand"] = run_hand(marks, sweep, args.hand_reference_iters, args.hand_tv, out, algorithms)
     report(out, "accuracy", results, markdown(results, marks))
     return 0
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Seconds per FISTA iteration at full size: every configuration in one run, repeats interleaved, medians.
+"""Seconds per iteration at full size: every configuration in one run, repeats interleaved, medians.
 
     python tools/bench_iteration.py --size 320x448 --bands 64 --repeat 3 --json iteration.json
 
@@ -47,6 +47,8 @@ def configurations(bands: int, ranks, backends) -> dict:
     for backend in backends:
         configs[f"{backend} full solver (--no-skip)"] = (backend, {"skip": False}, 1)
         configs[f"{backend} default (paper field, {bands} bands)"] = (backend, {}, 1)
+        if backend == "numpy":
+            configs[f"{backend} --algorithm admm (paper field, {bands} bands)"] = (backend, {"algorithm": "admm"}, 1)
         configs[f"{backend} --support-field ({bands} bands)"] = (backend, SPEED, 1)
         configs[f"{backend} --subspace --support-field (automatic rank)"] = (backend, SPEED | {"subspace": True},
                                                                              WARMUP + 1)

@@ -44,6 +44,7 @@ from clsdcam.solver import Settings, Solver  # noqa: E402
 CONFIGS = {  # name -> (backend, Settings fields)
     "numpy": ("numpy", {}),
     "numpy --no-skip": ("numpy", {"skip": False}),
+    "numpy --algorithm admm": ("numpy", {"algorithm": "admm"}),
     "numpy --support-field": ("numpy", {"support_field": True}),
     "numpy --subspace --support-field": ("numpy", {"subspace": True, "support_field": True}),
     "opencl": ("opencl", {}),

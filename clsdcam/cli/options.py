@@ -162,7 +162,8 @@ def add_solver_options(p: argparse.ArgumentParser):
 
     p.add_argument("--iters", type=positive_int, default=DEFAULT_ITERS, help=f"iterations (default {DEFAULT_ITERS})")
     p.add_argument("--algorithm", default="fista", choices=tuple(ALGORITHMS),
-                   help="the algorithm the solve runs (default fista: FISTA with adaptive restart)")
+                   help="the algorithm the solve runs (default fista: FISTA with adaptive restart; admm: ADMM with "
+                        "closed-form steps, fewer iterations, NumPy and band space only, --tv and --l1 only)")
     for row in PRIORS:
         p.add_argument(row.flag, dest=row.name, type=weight(row.prior.auto_weight is not None), default=row.default,
                        metavar="W|auto" if row.prior.auto_weight else "W", help=f"{row.help} (default {row.default})")

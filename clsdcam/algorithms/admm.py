@@ -1,0 +1,80 @@
+"""ADMM with closed-form steps (Boyd et al. 2011; the splits of Antipa et al.'s DiffuserCam solver, with the filter
+array's per-pixel inverse and the spectral TV's DCT): :mod:`clsdcam.splitting` holds the steps and their math, and
+docs/admm.md the derivation and the measurements. One iteration is the c-step (the transforms) and then each split's
+step with its dual:
+
+    v, Hv ← c-step(x − ξ, u − η, w − ρ);   x, ξ ← x-step(Hv + ξ);   u, η ← u-step(Dv + η);   w, ρ ← w-step(v + ρ)
+
+The iterate the driver sees is w, the non-negative copy of v. The penalties are fixed relative to the problem's own
+scales (so a brighter scene, another PSF normalisation or filter gain needs no new values): μ₁ = ``DATA``·mean‖f_p‖²,
+μ₂ = ``TV``·μ₁·max|Ĥ|², μ₃ = ``NONNEG``·μ₁·max|Ĥ|² (:func:`penalties_for`; how they were chosen, and why residual
+balancing is not used: docs/admm.md).
+
+ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
+returns it) without rolling back on a rise. It runs in band space on the NumPy backend (``move`` refuses a change
+of space; OpenCL kernels for its passes are still to come).
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import InputError
+from .base import ratio
+
+if TYPE_CHECKING:                 # the parser lists the algorithms: splitting's SciPy is imported when one solves
+    from ..splitting import Penalties, Splitting
+
+DATA, TV, NONNEG = 1e-2, 1e-2, 1e-2
+
+
+def penalties_for(split: "Splitting") -> "Penalties":
+    """The penalties from the problem's scales (the module docstring)."""
+    from ..splitting import Penalties
+
+    data = DATA * split.data_curvature
+    return Penalties(data=data, tv=TV * data * split.transfer_peak, nonneg=NONNEG * data * split.transfer_peak)
+
+
+class Admm:
+    """ADMM's state for one band-space problem (see the module docstring)."""
+
+    name = "admm"
+    monotone = False
+
+    def __init__(self, backend, x0, step: float, rules):
+        if backend.name != "numpy":
+            raise InputError("--algorithm admm runs on the NumPy backend for now (--backend numpy)")
+        self.backend = backend
+        self.step = step
+        self.x = np.array(x0, copy=True)
+        self.splitting: "Splitting | None" = None
+        self.state = None
+
+    def iterate(self, problem) -> dict:
+        if self.splitting is None:
+            self.splitting = problem.splitting()
+            self.splitting.set_penalties(penalties_for(self.splitting))
+            self.reset(self.x)
+        data, (step, norm) = self.splitting.iterate(self.state)
+        return {"data": data, "change": ratio(step, norm), "transforms": 4 * self.splitting.n_bands}
+
+    @property
+    def x(self):
+        """w, the non-negative copy of v (the start until the first iteration)."""
+        return self._start if self.state is None else self.state.w
+
+    @x.setter
+    def x(self, value):
+        self._start = value
+
+    def reset(self, point) -> None:
+        """Start again from ``point`` with zero duals (the checkpoints' back-off)."""
+        if self.splitting is None:
+            self._start = np.array(point, copy=True)
+            return
+        self.state, _ = self.splitting.start(point)
+
+    def move(self, mapping) -> None:
+        raise InputError("--algorithm admm runs in band space: no --subspace or --rank")
