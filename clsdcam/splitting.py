@@ -181,12 +181,14 @@ class Splitting:
     def start(self, v0: np.ndarray) -> tuple[SplitState, float]:
         """The state from v = v0 with zero duals: Hv by one convolution (2K transforms), then every split's step;
         and the data term at v0."""
-        empty = lambda shape=self.shape, dtype=self.dtype: np.zeros(shape, dtype)     # noqa: E731
-        spectrum = (self.n_bands, self.field_shape[0], self.field_shape[1] // 2 + 1)
-        n = len(self.axes)
-        state = SplitState(v=np.array(v0, self.dtype), hv=empty(), xi=empty((self.n_bands,) + self.sensor_shape),
-                           rho=empty(), w=empty(), eta=empty((n,) + self.shape), s=empty((n,) + self.shape),
-                           rest=empty(), spectra=(empty(spectrum, self.cdtype), empty(spectrum, self.cdtype)))
+        cube, spectrum = self.shape, (self.n_bands, self.field_shape[0], self.field_shape[1] // 2 + 1)
+        per_axis = (len(self.axes),) + cube
+        zeros = np.zeros
+        state = SplitState(v=np.array(v0, self.dtype), hv=zeros(cube, self.dtype),
+                           xi=zeros((self.n_bands,) + self.sensor_shape, self.dtype), rho=zeros(cube, self.dtype),
+                           w=zeros(cube, self.dtype), eta=zeros(per_axis, self.dtype), s=zeros(per_axis, self.dtype),
+                           rest=zeros(cube, self.dtype),
+                           spectra=(zeros(spectrum, self.cdtype), zeros(spectrum, self.cdtype)))
         state.hv[...] = self.convolve(state.v)
         data, _ = self.splits(state)
         return state, data
