@@ -117,6 +117,8 @@ class Solver:
         spaces = Spaces(self.model, self.b, priors, self.calibration.filters, self.lipschitz, self.last_lipschitz)
         rules = Rules(tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart)
         algorithm = ALGORITHMS[s.algorithm](be, start.field, start.step_factor / self.lipschitz, rules)
+        if start.carry is not None and hasattr(algorithm, "resume"):
+            algorithm.resume(*start.carry)
         # a carried basis is entered at once: no band-space F(x0)
         driver = Driver(algorithm, rules, None if start.basis is not None else spaces.band.objective)
         tracker = Tracker(self.model, scale, snapshots, progress)
@@ -133,9 +135,11 @@ class Solver:
         fit, structure = self._residual_figures(phases.problem, driver.x)
         out.attrs.update(relative_residual=fit, residual_to_noise=structure)
         out.snapshots = tracker.kept
+        carry = algorithm.carry() if hasattr(algorithm, "carry") else None
         out.state = SolverState(be.scale(scale / self.calibration.scale, field), phases.basis(), phases.core,
                                 phases.step_factor(), {p.name: p.relative for p in priors}, fit,
-                                {p.reference: p.unit for p in priors})
+                                {p.reference: p.unit for p in priors},
+                                None if carry is None else (carry, scale / self.calibration.scale))
         return out
 
     def _fit_rule(self, driver: Driver, fit: float | None):

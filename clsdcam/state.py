@@ -5,7 +5,10 @@ A video's frames differ little: the next solve starts from the last field (the w
 window), enters the spectral basis the last one ended in at once, if it ended in one (``--subspace`` or ``--rank``:
 no band-space warm-up, the rank kept), starts with the step it ended with (back-offs carried) and keeps the prior
 weights it chose (an ``auto`` weight is not estimated again). Momentum starts afresh: the objective is a new one.
-A cold start (zero, or a user's warm-start cube) is a :class:`Start` too, with no basis, weights or references.
+An algorithm with more state than its iterate (ADMM's splits and duals) leaves it in ``carry`` and resumes from it
+(``algorithm.resume``), scaled to the new measurement's units and handed over once (no copy of its arrays); a
+field moved by the drift drops it (:func:`clsdcam.batch.motion.predict_state`). A cold start (zero, or a user's warm-start cube) is a :class:`Start`
+too, with no basis, weights, references or carry.
 """
 from __future__ import annotations
 
@@ -19,8 +22,8 @@ import numpy as np
 class SolverState:
     """The field (a backend array, in the calibration's units), the basis (K × r) or None for band space, the
     core rank, the step times the Lipschitz constant of its space, the priors' relative weights and their data
-    references, and the fit ‖Av − b‖/‖b‖ the solve reached (what the next frame's solve may stop at:
-    ``Solver.solve(stop_at_fit=…)``)."""
+    references, the fit ‖Av − b‖/‖b‖ the solve reached (what the next frame's solve may stop at:
+    ``Solver.solve(stop_at_fit=…)``), and the algorithm's carry (see the module docstring)."""
 
     field: Any
     basis: np.ndarray | None
@@ -29,11 +32,15 @@ class SolverState:
     weights: dict[str, float] = field(default_factory=dict)
     fit: float = 0.0
     references: dict[str, float] = field(default_factory=dict)
+    carry: tuple | None = None     # (what the algorithm can resume from, the factor to the calibration's units)
 
     def start(self, backend, units: float) -> "Start":
-        """The next solve's start: this field times ``units`` (calibration units → the solver's), the rest kept."""
+        """The next solve's start: this field times ``units`` (calibration units → the solver's), the rest kept. The
+        carry is handed over, not copied (its arrays become the next solve's): a second start from this state has
+        none, and its algorithm starts afresh from the field."""
+        carry, self.carry = None if self.carry is None else (self.carry[0], self.carry[1] * units), None
         return Start(backend.scale(units, self.field), self.step_factor, True, self.basis, self.core, self.weights,
-                     self.references)
+                     self.references, carry)
 
 
 @dataclass(frozen=True)
@@ -49,6 +56,7 @@ class Start:
     core: int = 0
     weights: dict[str, float] = field(default_factory=dict)
     references: dict[str, float] = field(default_factory=dict)
+    carry: tuple | None = None     # (the algorithm's state to resume, the factor taking it to this solve's units)
 
     def reference(self, fresh: Callable[[str], float]) -> Callable[[str], float]:
         """The weights' data references (e.g. ‖Aᵀb‖_∞ of b / max|b|) this start carries, for the priors (its

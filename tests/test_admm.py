@@ -13,6 +13,7 @@ from clsdcam.model import ForwardModel
 from clsdcam.priors import Sparsity, TotalVariation
 from clsdcam.sim import simulate
 from clsdcam.solver import Settings, Solver
+from clsdcam.state import SolverState
 from clsdcam.backends import blocks
 from clsdcam.splitting import Penalties, SplitState, Splitting, difference, difference_adjoint_add
 
@@ -170,9 +171,35 @@ def test_admm_solves_with_the_driver(leds, default_sigint):
     assert stopped.stop_reason == "interrupted" and stopped.iterations == 12 and stopped.cube.max() > 0
     warm = solver.solve(leds.measurement, x0=result.cube, iters=3)
     assert warm.history[0]["data"] < 0.2 * result.history[0]["data"]
-    carried = solver.solve(leds.measurement, state=warm.state, iters=3)          # a video's next frame
-    assert carried.history[0]["data"] < 0.2 * result.history[0]["data"]         # duals start afresh: not lower still
-    assert carried.attrs["tv_chosen"] == warm.attrs["tv_chosen"] and "noise_estimate" not in carried.attrs
+    assert warm.history[0]["data"] > result.history[-1]["data"]                  # from a cube: duals afresh
+
+
+def test_a_videos_next_frame_resumes_the_splits_and_duals(leds):
+    """The state carries ADMM's splits and duals: the next frame goes on where the last stopped (its data term at
+    the first iteration no higher than the last one's, where fresh duals raise it); the carry is handed over once, so
+    a second start from that state starts afresh."""
+    solver = Solver(leds.calibration, settings=Settings(iters=30, algorithm="admm"))
+    first = solver.solve(leds.measurement)
+    state = first.state
+    assert state.carry is not None
+    resumed = solver.solve(leds.measurement, state=state, iters=3)
+    assert resumed.history[0]["data"] <= 1.01 * first.history[-1]["data"]
+    assert resumed.attrs["tv_chosen"] == first.attrs["tv_chosen"] and "noise_estimate" not in resumed.attrs
+    again = solver.solve(leds.measurement, state=state, iters=3)
+    assert state.carry is None and again.history[0]["data"] > 1.2 * first.history[-1]["data"]
+
+
+def test_the_carry_follows_the_measurements_units(leds):
+    """A carry in one solve's units reaches the next in its units, as the field does (the state stores the factor to
+    the calibration's units; the start multiplies by the new solve's), and resuming scales every array by it."""
+    state = SolverState(np.ones(2), None, 0, 1.0, carry=("arrays", 3.0))
+    assert state.start(NumpyBackend("float64"), 0.5).carry == ("arrays", 1.5)
+    split = Solver(leds.calibration, settings=Settings(iters=1, algorithm="admm")).solve(leds.measurement).state
+    arrays = split.carry[0]
+    before = {name: getattr(arrays, name).copy() for name in ("v", "xi", "eta", "rho", "s", "rest")}
+    algorithm = admm.Admm(NumpyBackend("float32"), arrays.w, 1.0, None)
+    algorithm.resume(arrays, 0.25)
+    assert all(np.array_equal(getattr(arrays, name), 0.25 * value) for name, value in before.items())
 
 
 @pytest.mark.parametrize("settings, message", [

@@ -94,3 +94,27 @@ def test_rectangular_bandmix_expands_and_projects():
     assert expanded.shape == (6, 3, 4)
     np.testing.assert_allclose(expanded, np.einsum("kj,jhw->khw", basis, c))
     np.testing.assert_allclose(be.bandmix(expanded, basis.T), np.einsum("kj,khw->jhw", basis, expanded))
+
+
+def test_a_ctrl_c_during_the_blocks_is_raised_once_every_thread_has_finished(default_sigint):
+    """A Ctrl-C reaches the main thread while two threads work: it is raised only after both have written their last
+    row, so whatever handles it (the driver putting the best iterate back) is not overwritten afterwards."""
+    import _thread
+    import threading
+    import time
+
+    out = np.zeros(4)
+    first = threading.Event()
+
+    def work(y0, y1, _scratch):
+        if y0 == 0:
+            first.set()
+            _thread.interrupt_main()          # as a Ctrl-C arriving now
+        else:
+            first.wait()
+        time.sleep(0.3)
+        out[y0:y1] = 1.0
+
+    with pytest.raises(KeyboardInterrupt):
+        map_blocks(work, 4, row_bytes=1 << 30, workers=2)       # one row a block, two spans
+    assert np.all(out == 1.0)

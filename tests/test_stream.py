@@ -65,13 +65,16 @@ def test_a_state_field_in_a_subspace_moves_through_its_coefficients():
 
 
 def test_predict_state_moves_only_the_field():
+    """The field moves with the drift; the step, weights and fit stay; an algorithm's carry (ADMM's duals, which
+    belong to the unmoved field) is dropped."""
     from clsdcam.backends.numpy import NumpyBackend
 
     before, d = smooth_cube(), (0.5, 0.5)
-    state = SolverState(field=before.copy(), basis=None, core=0, step_factor=0.8, weights={"tv": 1e-3}, fit=0.01)
+    state = SolverState(field=before.copy(), basis=None, core=0, step_factor=0.8, weights={"tv": 1e-3}, fit=0.01,
+                        carry=("duals", 1.0))
     moved = predict_state(before, shifted(before, d), state, NumpyBackend(np.float32))
     np.testing.assert_allclose(drift(state.field, moved.field), d, atol=0.1)
-    assert (moved.step_factor, moved.weights, moved.fit) == (0.8, {"tv": 1e-3}, 0.01)
+    assert (moved.step_factor, moved.weights, moved.fit, moved.carry) == (0.8, {"tv": 1e-3}, 0.01, None)
     assert predict_state(None, before, state, NumpyBackend(np.float32)) is state
 
 

@@ -86,10 +86,12 @@ def stream(args, workdir: Path) -> dict:
                                                 drift=args.drift)
     calibration, _ = preprocess(calibration, frames[0], Preprocessing())
     start = time.perf_counter()
-    solver = Solver(calibration, backend=args.backend, settings=Settings(iters=args.iters))
+    solver = Solver(calibration, backend=args.backend, settings=Settings(iters=args.iters, algorithm=args.algorithm))
     setup = time.perf_counter() - start
     rows, carried = [], Carried()
     for t, frame in enumerate(frames):
+        if args.fresh_duals and carried.state is not None:
+            carried.state.carry = None          # what a warm start from the cube alone would do
         start = time.perf_counter()
         result = next_solve(solver, frame, carried, (args.cold_iters, args.iters))
         seconds = time.perf_counter() - start
@@ -109,8 +111,10 @@ def stream(args, workdir: Path) -> dict:
 
 def _print_stream(args, rows, summary):
     cold = [f"cold {args.reference_iters} it. PSNR dB"] if args.reference_iters else []
+    fresh = " (fresh duals)" if args.fresh_duals else ""
     print(f"stream: {args.scene} {args.bands}×{args.shape[0]}×{args.shape[1]}, drift {args.drift} px/frame, "
-          f"{args.backend}; frame 0 cold ({args.cold_iters} it.), then warm (≤ {args.iters} it.)")
+          f"{args.backend}, {args.algorithm}{fresh}; frame 0 cold ({args.cold_iters} it.), then warm (≤ {args.iters} "
+          "it.)")
     print("| " + " | ".join(["frame", "iterations (stop)", "s", "PSNR dB", *cold]) + " |")
     print("|" + "---:|" * (4 + len(cold)))
     for r in rows:
@@ -135,6 +139,9 @@ def main(argv=None) -> int:
                         help="stream: each frame also solved cold with this many iterations (0: not)")
     parser.add_argument("--drift", default="0.3,0.6", help="stream: the scene's drift, DY,DX px per frame")
     parser.add_argument("--backend", default="numpy", help="stream: numpy or opencl")
+    parser.add_argument("--algorithm", default="fista", help="stream: the solver's algorithm (fista or admm)")
+    parser.add_argument("--fresh-duals", action="store_true",
+                        help="stream: drop what the algorithm carries between frames (ADMM: its duals)")
     parser.add_argument("--workers", default="0,1,2", help="throughput: worker counts, one batch each")
     parser.add_argument("--repeat", type=int, default=1, help="throughput: rounds over the worker counts (medians)")
     parser.add_argument("--json", default=None)

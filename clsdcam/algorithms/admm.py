@@ -11,8 +11,10 @@ scales (so a brighter scene, another PSF normalisation or filter gain needs no n
 balancing is not used: docs/admm.md).
 
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
-returns it) without rolling back on a rise. It runs in band space on the NumPy backend (``move`` refuses a change
-of space; OpenCL kernels for its passes are still to come).
+returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
+(:meth:`Admm.carry`, :meth:`Admm.resume`); a warm start from a cube (``x0``) starts its duals afresh. It runs in
+band space on the NumPy backend (``move`` refuses a change of space; OpenCL kernels for its passes are still to
+come).
 """
 from __future__ import annotations
 
@@ -51,12 +53,17 @@ class Admm:
         self.x = np.array(x0, copy=True)
         self.splitting: "Splitting | None" = None
         self.state = None
+        self._resumed = None
 
     def iterate(self, problem) -> dict:
         if self.splitting is None:
             self.splitting = problem.splitting()
             self.splitting.set_penalties(penalties_for(self.splitting))
-            self.reset(self.x)
+            if self._resumed is not None and self._resumed.v.shape == self.splitting.shape:
+                self.state = self._resumed
+            else:
+                self.reset(self.x)
+            self._resumed = None
         data, (step, norm) = self.splitting.iterate(self.state)
         return {"data": data, "change": ratio(step, norm), "transforms": 4 * self.splitting.n_bands}
 
@@ -75,6 +82,17 @@ class Admm:
             self._start = np.array(point, copy=True)
             return
         self.state, _ = self.splitting.start(point)
+
+    def carry(self):
+        """What the next frame's solve resumes from: the splits and duals (None before the first iteration)."""
+        return self.state
+
+    def resume(self, state, factor: float) -> None:
+        """Go on from a previous solve's splits and duals (:meth:`carry`), every array times ``factor`` (its units to
+        this solve's: the problem is homogeneous in b), instead of starting the duals afresh."""
+        for name in ("v", "hv", "xi", "rho", "w", "eta", "s", "rest"):
+            getattr(state, name)[...] *= factor
+        self._resumed = state
 
     def move(self, mapping) -> None:
         raise InputError("--algorithm admm runs in band space: no --subspace or --rank")

@@ -18,6 +18,10 @@ and keeps whatever iterates it needs. To the driver it is:
 * ``move(mapping)``: every iterate through ``mapping`` (a change of space, e.g. onto a spectral basis), any
   momentum kept.
 
+Optionally, an algorithm with more state than its iterates keeps it across a video's frames: ``carry()`` returns it
+(or None) for :class:`clsdcam.state.SolverState`, and ``resume(carried, factor)`` takes it over before the first
+iteration, every array times ``factor`` (ADMM's splits and duals).
+
 A constructor ``(backend, x0, step, rules)`` copies x0 into its iterates (``rules``: :class:`clsdcam.driver.Rules`).
 A new algorithm is one module and one line in :data:`clsdcam.algorithms.ALGORITHMS`.
 """

@@ -13,7 +13,7 @@ its share of the cores), else the cores this process may run on.
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import nullcontext
 from functools import lru_cache
 from typing import Callable
@@ -64,7 +64,9 @@ def spans(n_rows: int, parts: int) -> list[tuple[int, int]]:
 def map_blocks(work: Callable[[int, int, dict], object], n_rows: int, row_bytes: int, workers: int) -> list:
     """``work(y0, y1, scratch)`` over row blocks covering [0, n_rows); its results in row order.
 
-    ``scratch`` is a dict private to the calling thread, for buffers reused across its blocks.
+    ``scratch`` is a dict private to the calling thread, for buffers reused across its blocks. A Ctrl-C while the
+    threads work is raised once they have finished, so the caller's handler (the driver's: the best iterate back into
+    the algorithm's arrays) runs with no thread still writing.
     """
     block = rows_per_block(row_bytes)
 
@@ -76,7 +78,12 @@ def map_blocks(work: Callable[[int, int, dict], object], n_rows: int, row_bytes:
     if len(parts) == 1:
         return walk(parts[0])
     with single_threaded_blas():
-        return [r for results in _pool(len(parts)).map(walk, parts) for r in results]
+        futures = [_pool(len(parts)).submit(walk, part) for part in parts]
+        try:
+            return [r for future in futures for r in future.result()]
+        except KeyboardInterrupt:      # the spans still running finish first: nothing writes after a Ctrl-C is seen
+            wait(futures)
+            raise
 
 
 @lru_cache(maxsize=1)
