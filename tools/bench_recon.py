@@ -169,12 +169,14 @@ def skip_table(results) -> str:
     return "\n".join(lines)
 
 
-PLOTTED = {"error": "relative error vs converged\nfull-problem float64 solution", "psnr": "PSNR vs truth (dB)"}
+PLOTTED = {"error": "relative error vs converged\nfull-problem float64 solution", "psnr": "PSNR vs truth (dB)",
+           "angle": "mean spectral angle\nvs truth (°)"}
 
 
 def plot(results, path: Path):
-    """Top row (with a reference): relative error against the converged full-problem solution; bottom row: PSNR
-    against the truth (a subspace solution converges to its own optimum, so the two rows tell different stories)."""
+    """Top row (with a reference): relative error against the converged full-problem solution; then PSNR and mean
+    spectral angle against the truth (a subspace solution, or another algorithm's with its own prior, converges to
+    its own optimum, so the rows tell different stories)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
