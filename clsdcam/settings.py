@@ -18,7 +18,6 @@ from .priors import AUTO, PRIORS
 DEFAULT_ITERS = 300
 COLD_ITERS = 40     # a stream's cold start (a batch chunk's first frame): what reached a cold solve's accuracy (with --subspace, docs/batch.md)
 DEFAULT_TOL = 0.0
-ADMM_PRIORS = ("tv", "l1")     # the priors ADMM has a closed-form step for (clsdcam.splitting)
 
 
 @dataclass(frozen=True)
@@ -45,8 +44,6 @@ class SolverSettings:
         _require(_is_int(self.iters) and self.iters >= 1, f"--iters {self.iters}: must be an integer ≥ 1")
         _require(self.algorithm in ALGORITHMS,
                  f"--algorithm {self.algorithm!r}: expected one of {', '.join(ALGORITHMS)}")
-        _require(self.algorithm != "admm" or not (self.subspace or self.rank),
-                 "--algorithm admm runs in band space: drop --subspace and --rank (or use --algorithm fista)")
         _require(_finite_nonneg(self.step_scale) and self.step_scale > 0, f"step_scale {self.step_scale}: must be > 0")
         _require(_is_int(self.rank) and self.rank >= 0, f"--rank {self.rank}: must be an integer ≥ 0")
         for name in ("tol", "plateau"):
@@ -58,12 +55,22 @@ class SolverSettings:
                 continue
             _require(_finite_nonneg(value), f"{row.flag} {value}: must be a finite number ≥ 0"
                      + (" or auto" if row.prior.auto_weight else ""))
-        unsplit = [row.flag for row in PRIORS if row.name not in ADMM_PRIORS and getattr(self, row.name) != 0]
-        _require(self.algorithm != "admm" or not unsplit,
-                 f"--algorithm admm has steps for --tv and --l1 only, not {', '.join(unsplit)} (use --algorithm fista)")
+        self._check_algorithm_limits(ALGORITHMS[self.algorithm])
         _require(len(self.tv_weights) == 3 and all(_finite_nonneg(w) for w in self.tv_weights),
                  f"--tv-weights {self.tv_weights}: expected three finite numbers ≥ 0 (x, y, λ)")
         _require(self.objective_every >= 1, f"objective_every {self.objective_every}: must be ≥ 1")
+
+
+    def _check_algorithm_limits(self, algorithm):
+        """What the algorithm declares it cannot do yet (:mod:`clsdcam.algorithms.base`): a subspace, other priors."""
+        name = self.algorithm
+        _require(not getattr(algorithm, "band_space_only", False) or not (self.subspace or self.rank),
+                 f"--algorithm {name} runs in band space: drop --subspace and --rank (or use --algorithm fista)")
+        stepped = getattr(algorithm, "priors", None)
+        if stepped is not None:
+            others = [row.flag for row in PRIORS if row.name not in stepped and getattr(self, row.name) != 0]
+            _require(not others, f"--algorithm {name} has steps for {' and '.join('--' + p for p in stepped)} only, "
+                                 f"not {', '.join(others)} (use --algorithm fista)")
 
 
 Settings = make_dataclass(

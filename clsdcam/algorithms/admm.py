@@ -44,13 +44,16 @@ class Admm:
 
     name = "admm"
     monotone = False
+    backends = ("numpy",)          # no OpenCL kernels for its passes yet
+    band_space_only = True         # no splitting of a spectral subspace yet
+    priors = ("tv", "l1")          # the priors it has a closed-form step for (clsdcam.splitting)
 
     def __init__(self, backend, x0, step: float, rules):
-        if backend.name != "numpy":
+        if backend.name not in self.backends:
             raise InputError("--algorithm admm runs on the NumPy backend for now (--backend numpy)")
         self.backend = backend
         self.step = step
-        self.x = np.array(x0, copy=True)
+        self._start = np.array(x0, copy=True)
         self.splitting: "Splitting | None" = None
         self.state = None
         self._resumed = None
@@ -71,10 +74,6 @@ class Admm:
     def x(self):
         """w, the non-negative copy of v (the start until the first iteration)."""
         return self._start if self.state is None else self.state.w
-
-    @x.setter
-    def x(self, value):
-        self._start = value
 
     def reset(self, point) -> None:
         """Start again from ``point`` with zero duals (the checkpoints' back-off)."""

@@ -18,6 +18,10 @@ and keeps whatever iterates it needs. To the driver it is:
 * ``move(mapping)``: every iterate through ``mapping`` (a change of space, e.g. onto a spectral basis), any
   momentum kept.
 
+What it cannot do yet it declares as class attributes, which ``Settings`` and ``--backend auto`` read (absent: no
+limit): ``backends`` (the backend names it runs on), ``band_space_only`` (no ``--subspace`` or ``--rank``) and
+``priors`` (the prior names it has a step for).
+
 Optionally, an algorithm with more state than its iterates keeps it across a video's frames: ``carry()`` returns it
 (or None) for :class:`clsdcam.state.SolverState`, and ``resume(carried, factor)`` takes it over before the first
 iteration, every array times ``factor`` (ADMM's splits and duals).

@@ -28,17 +28,17 @@ def solve(args, calibration, measurement, snapshots=()):
     return result
 
 
-NUMPY_ONLY = ("admm",)      # algorithms without OpenCL kernels yet: ``--backend auto`` picks NumPy for them
-
-
 def chosen_backend(args) -> str:
     """The backend ``--backend`` names; for ``auto`` (the default) its choice
     (:func:`clsdcam.backends.resolve_backend`), said in one line: ``backend: opencl on DEVICE (auto: a GPU was
-    found)`` or ``backend: numpy (auto: no OpenCL GPU)``."""
+    found)`` or ``backend: numpy (auto: no OpenCL GPU)``; NumPy for an algorithm whose ``backends`` leave OpenCL
+    out."""
+    from ..algorithms import ALGORITHMS
     from ..backends import resolve_backend
 
-    if args.backend == "auto" and getattr(args, "algorithm", "fista") in NUMPY_ONLY:
-        name, why = "numpy", f"--algorithm {args.algorithm} runs on NumPy"
+    algorithm = getattr(args, "algorithm", "fista")
+    if args.backend == "auto" and "opencl" not in getattr(ALGORITHMS[algorithm], "backends", ("opencl",)):
+        name, why = "numpy", f"--algorithm {algorithm} runs on NumPy"
     else:
         name, why = resolve_backend(args.backend, args.device)
     if why:
