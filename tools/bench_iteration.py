@@ -140,14 +140,14 @@ def table(result: dict) -> str:
         field = "×".join(map(str, result["fields"].get(name, ()))) or "paper"
         versus = f"{authors / sec:.1f}×" if authors else "—"
         floor_ratios = "— | —" if name == AUTHORS else f"{sec / floors[PAPER]:.2f} | {sec / floors[OWN]:.2f}"
-        lines.append(f"| {name} | {field} | {sec:.3f} ({_spread(result['samples'][name])}) | {versus} | {floor_ratios} |")
-    lines += [f"| FFT floor, {name} (4·K transforms) | | {sec:.3f} ({_spread(result['samples'][name])}) | | | |"
+        lines.append(f"| {name} | {field} | {sec:.4f} ({_spread(result['samples'][name])}) | {versus} | {floor_ratios} |")
+    lines += [f"| FFT floor, {name} (4·K transforms) | | {sec:.4f} ({_spread(result['samples'][name])}) | | | |"
               for name, sec in floors.items()]
     return "\n".join(lines) + "\n\ndevices: " + "; ".join(result["devices"]) + ratio_lines(seconds)
 
 
 def _spread(samples) -> str:
-    return f"{min(samples):.3f}–{max(samples):.3f}"
+    return f"{min(samples):.4f}–{max(samples):.4f}"
 
 
 def ratio_lines(seconds: dict) -> str:

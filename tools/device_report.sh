@@ -3,7 +3,7 @@
 # benchmark (every device FFT engine) and the iteration benchmark on one OpenCL device, everything into OUTDIR.
 #
 #   tools/device_report.sh OUTDIR [--device SUBSTRING] [--size HxW] [--bands K] [--repeat N] [--ranks R,..]
-#                                 [--no-install]
+#                                 [--backends LIST] [--no-install]
 #
 # The device: --device (a substring of its platform or device name, as `clsdcam --device`), else PYOPENCL_CTX, else
 # the first GPU, else the first CPU (clsdcam.backends.cl_devices.choose_device); every step runs on it through
@@ -11,6 +11,8 @@
 # installed (python -m clsdcam.backends.cl_icd). Defaults are the full problem (64 bands, sensor 320x448, the GPU
 # target of issue 18: an iteration in <= 3 ms on one H100); on a CPU take a small one, e.g.
 #   tools/device_report.sh /tmp/report --device Intel --size 32x48 --bands 8 --repeat 1 --no-install
+# The iteration benchmark runs --backends: opencl by default; numpy,opencl adds NumPy's rows, which take minutes at
+# full size (on the 16-core host of an H200 they had not finished after 150 s).
 # Python: $PYTHON, else .venv/bin/python, else python3. A failing step is recorded in summary.txt (exit code, log)
 # and the next one still runs; the script's own exit code is the number of failed steps.
 set -uo pipefail
@@ -19,7 +21,7 @@ cd "$(dirname "$0")/.."
 usage() { sed -n '5,6p' "$0" | sed 's/^# *//' >&2; exit 2; }
 [ $# -ge 1 ] && [ "${1#-}" = "$1" ] || usage
 OUT=$1; shift
-DEVICE="" SIZE=320x448 BANDS=64 REPEAT=3 RANKS=3,8 INSTALL=1
+DEVICE="" SIZE=320x448 BANDS=64 REPEAT=3 RANKS=3,8 BACKENDS=opencl INSTALL=1
 while [ $# -gt 0 ]; do
     case $1 in
         --device) DEVICE=$2; shift 2 ;;
@@ -27,6 +29,7 @@ while [ $# -gt 0 ]; do
         --bands) BANDS=$2; shift 2 ;;
         --repeat) REPEAT=$2; shift 2 ;;
         --ranks) RANKS=$2; shift 2 ;;
+        --backends) BACKENDS=$2; shift 2 ;;
         --no-install) INSTALL=0; shift ;;
         *) usage ;;
     esac
@@ -48,7 +51,7 @@ step() {
 }
 
 { echo "device report, $(date -u '+%Y-%m-%d %H:%M UTC'), commit $(git rev-parse --short HEAD 2>/dev/null)"
-  echo "options: device=${DEVICE:-auto} size=$SIZE bands=$BANDS repeat=$REPEAT ranks=$RANKS"
+  echo "options: device=${DEVICE:-auto} size=$SIZE bands=$BANDS repeat=$REPEAT ranks=$RANKS backends=$BACKENDS"
   echo "machine: $(uname -srm), $(nproc) cores"; } >"$SUMMARY"
 if [ $INSTALL = 1 ]; then
     step install env VKFFT_BACKEND=opencl "$PY" -m pip install -e '.[vkfft]'
@@ -79,6 +82,6 @@ for engine in $("$PY" -c "from clsdcam.backends.fft import available_engines; pr
         --bands "$BANDS" --repeat "$REPEAT" --json "$OUT/kernels-device-$engine.json"
 done
 step iteration "$PY" tools/bench_iteration.py --size "$SIZE" --bands "$BANDS" --ranks "$RANKS" --repeat "$REPEAT" \
-    --backends numpy,opencl --no-authors --json "$OUT/iteration.json"
+    --backends "$BACKENDS" --no-authors --json "$OUT/iteration.json"
 echo "$FAILED step(s) failed; everything is in $OUT" | tee -a "$SUMMARY"
 exit "$FAILED"
