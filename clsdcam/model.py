@@ -82,7 +82,7 @@ class ForwardModel:
         related model's iteration from it).
         """
         be = self.backend
-        flat = np.full(self.cube_shape, 1.0 / np.sqrt(np.prod(self.cube_shape)))
+        flat = np.full(self.cube_shape, 1.0 / np.sqrt(np.prod(self.cube_shape)), dtype=be.dtype)
         v = be.to_device(flat)
         if start is not None:
             be.axpy(1.0, start, v, out=v)

@@ -125,8 +125,9 @@ class Phases:
         """One full proximal-gradient step from v = B·c, and the policy's Move or Leave."""
         problem = self.problem
         step = self.driver.step * self.lipschitz / self.spaces.lipschitz      # the full space's step
-        gain, before, stepped = self.spaces.full_step(problem, self.driver.x, step)
-        self.tracker.count(self.spaces.full_step_transforms(problem))
+        judged = not self.rank                     # a fixed rank's check reads only the stepped spectra
+        gain, before, stepped = self.spaces.full_step(problem, self.driver.x, step, judged)
+        self.tracker.count(self.spaces.full_step_transforms(problem, judged))
         action = on_check(before, stepped, gain, problem.subspace.basis, self.core, self.rank, self.spaces.n_bands)
         self.core = action.core
         if isinstance(action, Leave):

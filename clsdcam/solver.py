@@ -44,6 +44,7 @@ from .problem import Problem
 from .settings import Settings
 from .skips import bands_line, field_line, plan_geometry, terms_line
 from .spaces import LastLipschitz, Spaces
+from .splitting import CalibrationTerms
 from .state import SolverState, Start
 
 __all__ = ["Result", "Settings", "Solver", "reconstruct"]
@@ -91,6 +92,7 @@ class Solver:
         self.lipschitz = self.model.lipschitz()
         self.b = None          # the measurement being solved, divided by max|b|, on the device
         self.last_lipschitz = LastLipschitz()    # L of the last spectral subspace: reused for the same basis
+        self._splitting_terms = None              # ADMM's terms of this calibration, built on first use
 
     def solve(self, measurement: np.ndarray, x0: np.ndarray | None = None,
               progress: Callable[[dict], None] | None = None, snapshots=(), state: SolverState | None = None,
@@ -114,7 +116,8 @@ class Solver:
         start = state.start(be, self.calibration.scale / scale) if state else self._start(x0, scale)
         priors = build_priors(be, s, start.reference(DataReferences(self.model, self.b, self.lipschitz).value))
         start.apply_weights(priors)
-        spaces = Spaces(self.model, self.b, priors, self.calibration.filters, self.lipschitz, self.last_lipschitz)
+        spaces = Spaces(self.model, self.b, priors, self.calibration.filters, self.lipschitz, self.last_lipschitz,
+                        self.splitting_terms)
         rules = Rules(tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart)
         algorithm = ALGORITHMS[s.algorithm](be, start.field, start.step_factor / self.lipschitz, rules)
         if start.carry is not None and hasattr(algorithm, "resume"):
@@ -164,6 +167,12 @@ class Solver:
         return (float(np.linalg.norm(r)) / norm if norm > 0 else 0.0), (rms / sigma if sigma > 0 else 0.0)
 
     # ---- pieces -------------------------------------------------------------------------
+    def splitting_terms(self) -> CalibrationTerms:
+        """ADMM's :class:`~clsdcam.splitting.CalibrationTerms` of this solver's model, built once."""
+        if self._splitting_terms is None:
+            self._splitting_terms = CalibrationTerms(self.model, self.calibration.filters)
+        return self._splitting_terms
+
     def _check_memory(self):
         """Devices with their own memory say up front (InputError) when the problem cannot fit."""
         check = getattr(self.backend, "check_problem", None)

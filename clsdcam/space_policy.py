@@ -126,8 +126,9 @@ def on_entry(reading: Reading, fixed_rank: int, n_bands: int) -> Enter | Stay:
 def on_check(before: np.ndarray, stepped: np.ndarray, gain: float, basis: np.ndarray, core: int, fixed_rank: int,
              n_bands: int) -> Move | Leave:
     """After a full step from ``before`` to ``stepped`` (host windows) that lowered the data term by ``gain``: the
-    basis read again (``fixed_rank``: at that size), never below the core rank, widened by the turning directions
-    when the gain passes WIDEN_GAIN; Leave when it would pass K/2."""
+    basis read again (``fixed_rank``: at that size, from ``stepped`` alone: ``before`` and ``gain`` may be None),
+    never below the core rank, widened by the turning directions when the gain passes WIDEN_GAIN; Leave when it
+    would pass K/2."""
     spectra = Spectra.of_shapes(lit_shapes(stepped))
     if fixed_rank:
         return Move(spectra.basis(basis.shape[1]), core)

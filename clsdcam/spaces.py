@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import hashlib
 from functools import cached_property
+from typing import Callable
 
 import numpy as np
 
 from .priors import ProxAverage
 from .problem import Problem
-from .splitting import Splitting, band_splitting
+from .splitting import CalibrationTerms, Splitting, band_splitting
 from .subspace import SpectralSubspace
 
 
@@ -35,7 +36,10 @@ class LastLipschitz:
 class Spaces:
     """Band space and the subspaces of one measurement b (normalised, on the device) under ``priors``."""
 
-    def __init__(self, model, b, priors: list, filters: np.ndarray, lipschitz: float, last: LastLipschitz):
+    def __init__(self, model, b, priors: list, filters: np.ndarray, lipschitz: float, last: LastLipschitz,
+                 terms: Callable[[], CalibrationTerms] | None = None):
+        """``terms``: the solver's :class:`~clsdcam.splitting.CalibrationTerms` of ``model``, built on first use
+        (none: built here for this solve)."""
         self.model = model
         self.backend = model.backend
         self.b = b
@@ -44,6 +48,7 @@ class Spaces:
         self.lipschitz = lipschitz           # band space's
         self.n_bands = model.n_bands
         self._last = last
+        self._terms = terms or (lambda: CalibrationTerms(model, filters))
         self._buffers: dict = {}
 
     @cached_property
@@ -54,7 +59,7 @@ class Spaces:
 
     def splitting(self) -> Splitting:
         """ADMM's closed-form steps for band space (TV and L1 priors only)."""
-        return band_splitting(self.model, self.b, self.filters, self.priors)
+        return band_splitting(self.model, self.b, self._terms(), self.priors)
 
     def subspace(self, basis: np.ndarray, start=None) -> Problem:
         """The problem on ``basis`` (its L by a power iteration from ``start``, unless the last basis was the same)."""
@@ -79,20 +84,24 @@ class Spaces:
         """The sensor window of a band cube, on the host."""
         return self.model.window(x)
 
-    def full_step(self, problem: Problem, c, step: float) -> tuple[float, np.ndarray, np.ndarray]:
+    def full_step(self, problem: Problem, c, step: float, judged: bool = True) -> tuple:
         """One full proximal-gradient step from v = B·c, x⁺ = prox(v − step·Aᵀ(Av − b)): (the relative fall of the
-        data term, the windows of v and of x⁺). Counts as A·B·c, then Aᵀr and A·x⁺."""
+        data term, the windows of v and of x⁺). Counts as A·B·c, then Aᵀr and A·x⁺. Not ``judged`` (a fixed rank,
+        whose check reads only x⁺): (None, None, the window of x⁺), without A·x⁺ and the window of v."""
         full, sub = self.band, problem.subspace
         data = problem.data(c)                         # its residual A·B·c − b = A·v − b stays in place
         v = sub.expand(c)
-        before = self.window(v)
+        before = self.window(v) if judged else None
         z = self.model.adjoint(problem.residual_buffer, out=self._cube("z"), y=v, step=step)
         stepped = full.prox(z, step, self._cube("stepped"))
+        if not judged:
+            return None, None, self.window(stepped)
         gain = (data - full.data(stepped)) / data if data > 0 else 0.0
         return gain, before, self.window(stepped)
 
-    def full_step_transforms(self, problem: Problem) -> int:
-        return problem.transforms() // 2 + self.band.transforms()
+    def full_step_transforms(self, problem: Problem, judged: bool = True) -> int:
+        band = self.band.transforms()
+        return problem.transforms() // 2 + (band if judged else band // 2)
 
     def _cube(self, name: str):
         """A band cube for the checks (allocated at the first)."""

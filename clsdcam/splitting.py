@@ -123,28 +123,62 @@ def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarr
     return out
 
 
+class CalibrationTerms:
+    """What the steps need of one model's calibration alone, the filters f_p with their energies ‖f_p‖² and the
+    transfer function Ĥ with |Ĥ|², and of the penalties, the x-step's gains f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ) and the
+    c-step's divisors: built once and kept by the solver, so a video's frames do not rebuild them (the divisors
+    alone are a float64 pass over the whole spectrum); the terms of the last penalties are kept."""
+
+    def __init__(self, model, filters: np.ndarray):
+        self.dtype = np.dtype(model.backend.dtype)
+        self.cdtype = np.result_type(self.dtype, np.complex64)
+        self.field_shape, self.n_bands = model.field_shape, model.n_bands
+        self.filters = np.ascontiguousarray(filters, self.dtype)
+        self.filter_energy = np.einsum("khw,khw->hw", self.filters, self.filters, dtype=np.float64)
+        self.transfer = transfer_function(model.psf, model.geometry).astype(self.cdtype)
+        self.transfer_power = np.abs(self.transfer.astype(np.complex128)) ** 2
+        self._last = None           # ((penalties, TV axes), (gains, μ₁conj(Ĥ), divisors))
+
+    def for_penalties(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ), 1/(μ₁|Ĥ|² + μ₂(|d̂_y|² + |d̂_x|² + Λ_j) + μ₃)), TV's terms on ``axes`` only."""
+        key = (p, tuple(axes))
+        if self._last is None or self._last[0] != key:
+            self._last = (key, self._penalty_terms(p, axes))
+        return self._last[1]
+
+    def _penalty_terms(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        gain = (self.filters / (p.data + self.filter_energy)).astype(self.dtype)
+        data_transfer = (p.data * np.conj(self.transfer)).astype(self.cdtype)
+        hp, wp = self.field_shape
+        spatial = p.data * self.transfer_power
+        if 1 in axes:
+            spatial = spatial + p.tv * difference_spectrum(hp)[:, None]
+        if 2 in axes:
+            spatial = spatial + p.tv * difference_spectrum(wp, half=True)[None, :]
+        spectral = p.tv * band_eigenvalues(self.n_bands) if 0 in axes else np.zeros(self.n_bands)
+        return gain, data_transfer, (1.0 / (spatial[None] + spectral[:, None, None] + p.nonneg)).astype(self.dtype)
+
+
 class Splitting:
     """ADMM's steps for one band-space problem (see the module docstring), on NumPy arrays.
 
-    ``model``: the band space's :class:`~clsdcam.model.ForwardModel` (its PSF and geometry); ``b`` the normalised
-    measurement; ``filters`` (K, H, W); ``tv`` the :class:`~clsdcam.priors.TotalVariation` prior or None, ``l1`` the
-    :class:`~clsdcam.priors.Sparsity` prior or None (their weights are read at every step: an automatic weight chosen
-    mid-solve takes effect at once).
+    ``model``: the band space's :class:`~clsdcam.model.ForwardModel` (its geometry); ``b`` the normalised
+    measurement; ``terms`` the :class:`CalibrationTerms` of that model; ``tv`` the
+    :class:`~clsdcam.priors.TotalVariation` prior or None, ``l1`` the :class:`~clsdcam.priors.Sparsity` prior or None
+    (their weights are read at every step: an automatic weight chosen mid-solve takes effect at once).
     """
 
-    def __init__(self, model, b: np.ndarray, filters: np.ndarray, tv=None, l1=None, workers: int = 1):
-        self.dtype = np.dtype(model.backend.dtype)
-        self.cdtype = np.result_type(self.dtype, np.complex64)
+    def __init__(self, model, b: np.ndarray, terms: CalibrationTerms, tv=None, l1=None, workers: int = 1):
+        self.terms = terms
+        self.dtype, self.cdtype = terms.dtype, terms.cdtype
         self.field_shape = model.field_shape
         self.sensor_shape = model.sensor_shape
         self.shape = model.cube_shape
         self.n_bands = model.n_bands
         self.workers = workers
         self.b = np.asarray(b, self.dtype)
-        self.filters = np.ascontiguousarray(filters, self.dtype)
-        self.filter_energy = np.einsum("khw,khw->hw", self.filters, self.filters, dtype=np.float64)
-        self.transfer = transfer_function(model.psf, model.geometry).astype(self.cdtype)
-        self.transfer_power = np.abs(self.transfer.astype(np.complex128)) ** 2
+        self.filters, self.filter_energy = terms.filters, terms.filter_energy
+        self.transfer, self.transfer_power = terms.transfer, terms.transfer_power
         self.tv, self.l1 = tv, l1
         self.axes = [axis for axis, weight in enumerate(tv.axis_weights) if weight > 0] if tv is not None else []
         self.penalties: Penalties | None = None
@@ -163,19 +197,9 @@ class Splitting:
         return float(self.transfer_power.max())
 
     def set_penalties(self, penalties: Penalties):
-        """The penalties, and what depends on them: 1/(μ₁ + ‖f_p‖²) in the filters of the x-step, μ₁conj(Ĥ), and
-        the c-step's divisor per Fourier coefficient and DCT index."""
-        self.penalties = p = penalties
-        self._gain = (self.filters / (p.data + self.filter_energy)).astype(self.dtype)
-        self._data_transfer = (p.data * np.conj(self.transfer)).astype(self.cdtype)
-        hp, wp = self.field_shape
-        spatial = p.data * self.transfer_power
-        if 1 in self.axes:
-            spatial = spatial + p.tv * difference_spectrum(hp)[:, None]
-        if 2 in self.axes:
-            spatial = spatial + p.tv * difference_spectrum(wp, half=True)[None, :]
-        spectral = p.tv * band_eigenvalues(self.n_bands) if 0 in self.axes else np.zeros(self.n_bands)
-        self._inverse = (1.0 / (spatial[None] + spectral[:, None, None] + p.nonneg)).astype(self.dtype)
+        """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`)."""
+        self.penalties = penalties
+        self._gain, self._data_transfer, self._inverse = self.terms.for_penalties(penalties, self.axes)
 
     # ---- the state -----------------------------------------------------------------------------------------
     def start(self, v0: np.ndarray) -> tuple[SplitState, float]:
@@ -320,8 +344,8 @@ class Splitting:
                                 workers=self.workers)
 
 
-def band_splitting(model, b, filters: np.ndarray, priors: list) -> Splitting:
+def band_splitting(model, b, terms: CalibrationTerms, priors: list) -> Splitting:
     """The :class:`Splitting` of band space for ``priors`` (TV and L1: what ``Settings`` lets ADMM take)."""
     by_name = {prior.name: prior for prior in priors}
-    return Splitting(model, model.backend.to_host(b), filters, by_name.get("tv"), by_name.get("l1"),
+    return Splitting(model, model.backend.to_host(b), terms, by_name.get("tv"), by_name.get("l1"),
                      model.backend.workers)

@@ -15,7 +15,7 @@ from clsdcam.sim import simulate
 from clsdcam.solver import Settings, Solver
 from clsdcam.state import SolverState
 from clsdcam.backends import blocks
-from clsdcam.splitting import Penalties, SplitState, Splitting, difference, difference_adjoint_add
+from clsdcam.splitting import CalibrationTerms, Penalties, SplitState, Splitting, difference, difference_adjoint_add
 
 RNG = np.random.default_rng(7)
 
@@ -30,7 +30,8 @@ def tiny(request, monkeypatch):
     filters = RNG.random((3, 4, 5))
     model = ForwardModel(NumpyBackend("float64"), psf, filters)
     tv = TotalVariation(model.backend, 0.05, Settings(tv_weights=(1.0, 0.5, 2.0)))
-    split = Splitting(model, RNG.random((4, 5)), filters, tv=tv, l1=Sparsity(model.backend, 0.4, None), workers=2)
+    split = Splitting(model, RNG.random((4, 5)), CalibrationTerms(model, filters), tv=tv,
+                      l1=Sparsity(model.backend, 0.4, None), workers=2)
     split.set_penalties(Penalties(data=0.3, tv=0.7, nonneg=1.3))
     return model, split
 
@@ -187,6 +188,19 @@ def test_a_videos_next_frame_resumes_the_splits_and_duals(leds):
     assert resumed.attrs["tv_chosen"] == first.attrs["tv_chosen"] and "noise_estimate" not in resumed.attrs
     again = solver.solve(leds.measurement, state=state, iters=3)
     assert state.carry is None and again.history[0]["data"] > 1.2 * first.history[-1]["data"]
+
+
+def test_a_solver_builds_the_calibrations_terms_once_and_a_fresh_solver_gives_the_same_cube(leds):
+    """A video's frames reuse the solver's CalibrationTerms and, for the same penalties, the same divisor arrays;
+    the reuse changes nothing: a second solve matches a new solver's bit for bit."""
+    solver = Solver(leds.calibration, settings=Settings(iters=4, algorithm="admm"))
+    first = solver.solve(leds.measurement)
+    terms = solver.splitting_terms()
+    divisors = terms.for_penalties(*terms._last[0])[2]
+    second = solver.solve(0.5 * leds.measurement)
+    assert solver.splitting_terms() is terms and terms.for_penalties(*terms._last[0])[2] is divisors
+    fresh = Solver(leds.calibration, settings=Settings(iters=4, algorithm="admm")).solve(0.5 * leds.measurement)
+    assert np.array_equal(second.cube, fresh.cube) and not np.array_equal(first.cube, second.cube)
 
 
 def test_the_carry_follows_the_measurements_units(leds):

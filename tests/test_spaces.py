@@ -61,3 +61,7 @@ def test_the_check_takes_one_exact_full_proximal_gradient_step(spaces):
     data = spaces.band.data(v)
     assert gain == pytest.approx((data - spaces.band.data(expected)) / data, rel=1e-9)
     assert spaces.full_step_transforms(sub) == 4 * 4 // 2 + 4 * 8
+    unjudged = spaces.full_step(sub, c, step, judged=False)
+    assert unjudged[:2] == (None, None)
+    np.testing.assert_array_equal(unjudged[2], stepped)          # the same step, without A·x⁺ and v's window
+    assert spaces.full_step_transforms(sub, judged=False) == 4 * 4 // 2 + 4 * 8 // 2

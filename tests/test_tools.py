@@ -8,10 +8,12 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import bench_accuracy  # noqa: E402
+import bench_breakdown  # noqa: E402
 import bench_iteration  # noqa: E402
 import bench_panel  # noqa: E402
 import bench_recon  # noqa: E402
 import compare_recon  # noqa: E402
+import compare_speed  # noqa: E402
 import rank_signals  # noqa: E402
 import weight_oracles  # noqa: E402
 
@@ -258,3 +260,63 @@ def test_compare_recon_passes_the_same_code_and_catches_a_changed_cube(tmp_path,
     np.savez(tmp_path / "c.npz", **arrays)
     assert compare_recon.main(["compare", str(tmp_path / "a.npz"), str(tmp_path / "c.npz")]) == 1
     assert "panel/leds/default: relative L2 1.00e-04" in capsys.readouterr().out
+
+
+def test_bench_breakdown_charges_each_part_its_own_time_and_opaque_parts_their_insides():
+    ticks = iter(range(100))
+    clock = bench_breakdown.Clock(now=lambda: next(ticks))
+    with clock.running("outer", False):                    # 0 .. 9
+        with clock.running("inner", False):                # 1 .. 2
+            pass
+        with clock.running("check", True):                 # 3 .. 6
+            with clock.running("inner", False):            # inside an opaque part: no clock read
+                with clock.running("power", True):         # 4 .. 5
+                    pass
+        with clock.running("inner", False):                # 7 .. 8
+            pass
+    assert clock.seconds == {"inner": 2, "power": 1, "check": 2, "outer": 4}
+
+
+def test_bench_breakdown_splits_every_configuration_and_sets_the_fft_floor_beside_it(tmp_path, capsys):
+    out = tmp_path / "b.json"
+    assert bench_breakdown.main(["--size", "24x32", "--bands", "8", "--iters", "40", "--ranks", "3",
+                                 "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    rows = result["configurations"]
+    assert set(rows) == {"default", "--subspace", "--rank 3", "--algorithm admm"}
+    for name, row in rows.items():
+        parts = row["per_iteration"]
+        assert set(parts) == set(bench_breakdown.PER_ITERATION) and row["iterations"] == 40
+        assert parts[bench_breakdown.TRANSFORMS] > 0 and row["fft_floor"] > 0
+        assert all(v >= 0 for k, v in parts.items() if k != bench_breakdown.OTHER)
+        assert sum(parts.values()) * row["iterations"] == pytest.approx(row["total"] - sum(
+            share * row["total"] for share in row["one_off_share"].values()))
+    assert rows["--rank 3"]["rank"] == 3 and rows["--rank 3"]["one_off_share"][bench_breakdown.POWER] > 0
+    assert rows["default"]["per_iteration"][bench_breakdown.PRIOR] > 0
+    assert rows["--algorithm admm"]["per_iteration"][bench_breakdown.SPLITS] > 0
+    assert "together / FFT floor" in capsys.readouterr().out
+
+
+def test_bench_breakdown_on_opencl_finishes_the_queue_and_leaves_the_host_floor_out(tmp_path, capsys):
+    pytest.importorskip("pyopencl")
+    out = tmp_path / "b.json"
+    assert bench_breakdown.main(["--backend", "opencl", "--size", "24x32", "--bands", "8", "--iters", "20",
+                                 "--ranks", "", "--json", str(out)]) == 0
+    rows = json.loads(out.read_text())["configurations"]
+    assert set(rows) == {"default", "--subspace"}                 # ADMM runs on NumPy only
+    assert all(row["fft_floor"] is None and row["per_iteration"][bench_breakdown.TRANSFORMS] > 0
+               for row in rows.values())
+    assert "opencl: " in capsys.readouterr().out
+
+
+def test_compare_speed_pairs_two_checkouts_and_refuses_a_folder_without_one(tmp_path, capsys):
+    repo = Path(compare_speed.__file__).resolve().parent.parent
+    out = tmp_path / "speed.json"
+    assert compare_speed.main([str(repo), "--size", "24x32", "--bands", "8", "--iters", "5", "--pairs", "2",
+                               "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert len(result["pairs"]) == 2 and all(new > 0 and old > 0 for new, old in result["pairs"])
+    assert result["median_ratio"] == pytest.approx(np.median([n / o for n, o in result["pairs"]]))
+    assert "median ratio" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="no clsdcam checkout"):
+        compare_speed.main([str(tmp_path), "--pairs", "1"])

@@ -7,6 +7,8 @@ two, chosen once from its path, and its ``tv_norm``, ``gram``, ``bandmix``, ``su
 """
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
@@ -17,6 +19,7 @@ from .convolution import device_path
 GRAM_PIXELS = 64      # pixels per gram work item (at least)
 GRAM_GROUPS = 4       # gram work-groups per compute unit (at most), each for every (i, j)
 BANDMIX_ROWS = 8      # output bands per bandmix work item (as in bandmix.cl)
+MATRICES = 8          # bandmix matrices kept on the device (a basis, its transpose, the last moves' mappings)
 
 
 class KernelCode:
@@ -27,6 +30,7 @@ class KernelCode:
     def __init__(self, backend):
         self.backend = backend
         self._band_cubes = None            # (shape, expanded, stepped) of subspace_tv
+        self._matrices: dict = {}          # (shape, digest) -> device copy, oldest first
 
     def convolution(self, transfer, filters, field_shape, skip_unseen: bool = True):
         """fft2 → cmul → ifft2 → mask_sum on whole cubes (``convolution.PrimitiveConvolution``)."""
@@ -60,10 +64,22 @@ class KernelCode:
         rows, cols = np.shape(matrix)
         target = be.target(out, (rows,) + x.shape[1:], x)
         pixels = x.size // x.shape[0]
-        m = cla.to_device(be.queue, np.ascontiguousarray(matrix, dtype=be.dtype), allocator=be.allocator)
-        be.kernels.grid2("bandmix", pixels, -(-rows // BANDMIX_ROWS), target, x, m, np.int32(rows), np.int32(cols),
-                         np.int64(pixels))
+        be.kernels.grid2("bandmix", pixels, -(-rows // BANDMIX_ROWS), target, x, self._matrix(matrix),
+                         np.int32(rows), np.int32(cols), np.int64(pixels))
         return be.deliver(target, out)
+
+    def _matrix(self, matrix):
+        """The device copy of a small bandmix matrix, uploaded the first time it is seen (a subspace mixes by its
+        basis and its transpose every iteration: a blocking upload each time would stall the queue twice an
+        iteration), the MATRICES last ones kept."""
+        be = self.backend
+        host = np.ascontiguousarray(matrix, dtype=be.dtype)
+        key = (host.shape, hashlib.blake2b(host.tobytes(), digest_size=16).digest())
+        if key not in self._matrices:
+            if len(self._matrices) >= MATRICES:
+                del self._matrices[next(iter(self._matrices))]
+            self._matrices[key] = cla.to_device(be.queue, host, allocator=be.allocator)
+        return self._matrices[key]
 
     def subspace_tv(self, c, basis, tau, weights, out=None):
         """Expand, the fused haar_tv with max(·, 0), project, through two band cubes kept for the last shape."""

@@ -72,12 +72,14 @@ def _clipped_edges(xh, top, n, limits, scratch):
         if first <= last:
             _clipped_difference(xh[:, top + first:top + last + 1], xh[:, top + first - 1:top + last], e[:, first:last + 1], lim_y)
         yield e[:, :-1], e[:, 1:]
-    if lim_x is not None:
-        e = buffer(scratch, "e_x", (k, n, w + 1), dtype)
-        e[..., 0] = 0
-        e[..., w] = 0
-        _clipped_difference(core[..., 1:], core[..., :-1], e[..., 1:w], lim_x)
-        yield e[..., :-1], e[..., 1:]
+    if lim_x is not None:      # along each plane's core rows as one run of n·W values: long inner loops
+        m = n * w
+        e = buffer(scratch, "e_x", (k, m + 1), dtype)
+        run = core.reshape(k, m)
+        e[:, 0] = 0
+        _clipped_difference(run[:, 1:], run[:, :-1], e[:, 1:m], lim_x)
+        e[:, w::w] = 0         # the differences across a row's end, and past the last column
+        yield e[:, :-1].reshape(k, n, w), e[:, 1:].reshape(k, n, w)
 
 
 def _clipped_difference(after, before, out, limit):
