@@ -94,11 +94,21 @@ def _along(axis: int, index) -> tuple:
     return tuple(index if a == axis else slice(None) for a in range(3))
 
 
+def _rows_run(a: np.ndarray) -> np.ndarray:
+    """(K, n, W) viewed as (K, n·W): each plane's rows as one run (a view for a block of a cube's rows)."""
+    return a.reshape(a.shape[0], -1)
+
+
 def difference(v: np.ndarray, axis: int, out: np.ndarray, below=None) -> np.ndarray:
     """D_d v: v[i + 1] − v[i] along ``axis`` (0: λ, the last difference 0; 2: circular; 1: circular, or with the
-    row ``below`` the last one given (a block of a cube's rows))."""
+    row ``below`` the last one given (a block of a cube's rows)). Along x into a contiguous ``out`` the differences
+    are taken along each plane's rows as one run (long inner loops), the last column's then put right."""
     n = v.shape[axis]
-    np.subtract(v[_along(axis, slice(1, n))], v[_along(axis, slice(0, n - 1))], out=out[_along(axis, slice(0, n - 1))])
+    if axis == 2 and out.flags.c_contiguous:
+        np.subtract(_rows_run(v)[:, 1:], _rows_run(v)[:, :-1], out=_rows_run(out)[:, :-1])
+    else:
+        np.subtract(v[_along(axis, slice(1, n))], v[_along(axis, slice(0, n - 1))],
+                    out=out[_along(axis, slice(0, n - 1))])
     last = _along(axis, n - 1)
     if axis == 0:
         out[last] = 0
@@ -108,15 +118,23 @@ def difference(v: np.ndarray, axis: int, out: np.ndarray, below=None) -> np.ndar
     return out
 
 
-def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarray, above=None) -> np.ndarray:
+def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarray, above=None,
+                           scratch: dict | None = None) -> np.ndarray:
     """out += scale·D_dᵀu: (D_dᵀu)[i] = u[i − 1] − u[i] (along λ u[−1] = 0 and u[K−1] unused; along y the row
-    ``above`` the first one may be given, a block of a cube's rows; else circular)."""
+    ``above`` the first one may be given, a block of a cube's rows; else circular). Along x, scale·u[i − 1] is
+    formed whole (each plane's rows as one run, the first column's then put right) and added in one pass."""
     n = u.shape[axis]
     if axis == 0:
         out[_along(0, slice(0, n - 1))] -= scale * u[_along(0, slice(0, n - 1))]
         out[_along(0, slice(1, n))] += scale * u[_along(0, slice(0, n - 1))]
         return out
     out -= scale * u
+    if axis == 2:
+        shifted = scratch_buffer(scratch, "shifted", u.shape, u.dtype) if scratch is not None else np.empty_like(u)
+        np.multiply(_rows_run(u)[:, :-1], scale, out=_rows_run(shifted)[:, 1:])
+        np.multiply(u[..., n - 1], scale, out=shifted[..., 0])
+        out += shifted
+        return out
     out[_along(axis, slice(1, n))] += scale * u[_along(axis, slice(0, n - 1))]
     before = u[_along(axis, n - 1)] if above is None else above
     out[_along(axis, 0)] += scale * before
@@ -304,12 +322,12 @@ class Splitting:
         k, hp, wp = self.shape
         mu = self.penalties.tv
 
-        def block(y0, y1, _scratch):
+        def block(y0, y1, scratch):
             out = state.rest[:, y0:y1]
             for i, axis in enumerate(self.axes):
                 s = state.s[i]
                 above = s[:, (y0 - 1) % hp] if axis == 1 else None
-                difference_adjoint_add(s[:, y0:y1], axis, mu, out, above=above)
+                difference_adjoint_add(s[:, y0:y1], axis, mu, out, above=above, scratch=scratch)
 
         if self.axes:
             map_blocks(block, hp, k * wp * self.dtype.itemsize, self.workers)

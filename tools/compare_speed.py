@@ -4,6 +4,7 @@ ratio measured in one run (the machine's speed drifts ±30 % between runs; a pai
 
     python tools/compare_speed.py OLD_CHECKOUT --scene leds --size 320x448 --bands 64 --iters 60 --pairs 4
     python tools/compare_speed.py OLD_CHECKOUT --rank 8 --iters 150
+    python tools/compare_speed.py OLD_CHECKOUT --algorithm admm --iters 40
 
 Each solve is a fresh process (``PYTHONPATH`` = the checkout) that simulates the scene, builds the solver (NumPy)
 and times ``Solver.solve`` alone; set-up is not in the figure. The first pair warms the file cache and is not
@@ -32,7 +33,8 @@ def solve_seconds(args) -> float:
 
     shape = tuple(int(v) for v in args.size.split("x"))
     sim = simulate(scene=args.scene, shape=shape, n_bands=args.bands, seed=args.seed)
-    solver = Solver(sim.calibration, backend="numpy", settings=Settings(iters=args.iters, rank=args.rank))
+    settings = Settings(iters=args.iters, rank=args.rank, algorithm=args.algorithm)
+    solver = Solver(sim.calibration, backend="numpy", settings=settings)
     start = time.perf_counter()
     solver.solve(sim.measurement)
     return time.perf_counter() - start
@@ -69,6 +71,7 @@ def main(argv=None) -> int:
     parser.add_argument("--bands", type=int, default=64)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--rank", type=int, default=0, help="a fixed subspace rank (0: the default's band space)")
+    parser.add_argument("--algorithm", default="fista", help="fista or admm")
     parser.add_argument("--iters", type=int, default=60)
     parser.add_argument("--pairs", type=int, default=4)
     parser.add_argument("--json")
