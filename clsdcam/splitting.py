@@ -42,7 +42,7 @@ relative to the problem's own scales (:class:`Penalties`, :mod:`clsdcam.algorith
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 
 import numpy as np
 import scipy.fft
@@ -130,7 +130,8 @@ def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarr
         return out
     out -= scale * u
     if axis == 2:
-        shifted = scratch_buffer(scratch, "shifted", u.shape, u.dtype) if scratch is not None else np.empty_like(u)
+        dtype = np.result_type(u, scale)           # as scale·u would be (a float64 scale: formed in float64)
+        shifted = np.empty(u.shape, dtype) if scratch is None else scratch_buffer(scratch, "shifted", u.shape, dtype)
         np.multiply(_rows_run(u)[:, :-1], scale, out=_rows_run(shifted)[:, 1:])
         np.multiply(u[..., n - 1], scale, out=shifted[..., 0])
         out += shifted
@@ -159,7 +160,7 @@ class CalibrationTerms:
 
     def for_penalties(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ), 1/(μ₁|Ĥ|² + μ₂(|d̂_y|² + |d̂_x|² + Λ_j) + μ₃)), TV's terms on ``axes`` only."""
-        key = (p, tuple(axes))
+        key = (astuple(p), tuple(axes))
         if self._last is None or self._last[0] != key:
             self._last = (key, self._penalty_terms(p, axes))
         return self._last[1]

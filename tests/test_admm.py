@@ -87,6 +87,13 @@ def test_the_x_differences_along_row_runs_match_the_columnwise_ones_bit_for_bit(
     columnwise[..., 1:] += 0.3 * u[..., :-1]
     columnwise[..., 0] += 0.3 * u[..., -1]
     np.testing.assert_array_equal(difference_adjoint_add(u, 2, 0.3, np.ones_like(u), scratch={}), columnwise)
+    wide = np.ones_like(u)                                   # a float64 scale: the products formed in float64
+    wide -= np.float64(0.3) * u
+    wide[..., 1:] += np.float64(0.3) * u[..., :-1]
+    wide[..., 0] += np.float64(0.3) * u[..., -1]
+    np.testing.assert_array_equal(difference_adjoint_add(u, 2, np.float64(0.3), np.ones_like(u), scratch={}), wide)
+    fortran = np.asfortranarray(u)                           # no scratch, u in another layout
+    np.testing.assert_array_equal(difference_adjoint_add(fortran, 2, 0.3, np.ones_like(u)), columnwise)
 
 
 def test_the_c_step_solves_its_normal_equations(tiny):
@@ -212,9 +219,9 @@ def test_a_solver_builds_the_calibrations_terms_once_and_a_fresh_solver_gives_th
     solver = Solver(leds.calibration, settings=Settings(iters=4, algorithm="admm"))
     first = solver.solve(leds.measurement)
     terms = solver.splitting_terms()
-    divisors = terms.for_penalties(*terms._last[0])[2]
+    divisors = terms._last[1][2]
     second = solver.solve(0.5 * leds.measurement)
-    assert solver.splitting_terms() is terms and terms.for_penalties(*terms._last[0])[2] is divisors
+    assert solver.splitting_terms() is terms and terms._last[1][2] is divisors
     fresh = Solver(leds.calibration, settings=Settings(iters=4, algorithm="admm")).solve(0.5 * leds.measurement)
     assert np.array_equal(second.cube, fresh.cube) and not np.array_equal(first.cube, second.cube)
 

@@ -244,6 +244,25 @@ HOST_PATH_CASES = {"subspace_tv": 10 * ELEMENTWISE, "subspace_tv_weighted": 10 *
                    "tv_norm": REDUCTION, "tv_norm_xy": REDUCTION}
 
 
+def test_device_bandmix_uploads_a_matrix_once_and_keeps_the_recently_used(monkeypatch):
+    """A subspace mixes by B and Bᵀ every iteration: each is uploaded the first time only, and one-off matrices in
+    between push out the least recently used, not B."""
+    import clsdcam.backends.cl_kernel_code as code
+
+    backend = opencl()
+    uploads = []
+    to_device = code.cla.to_device
+    monkeypatch.setattr(code.cla, "to_device", lambda *a, **k: uploads.append(a[1].shape) or to_device(*a, **k))
+    rng = np.random.default_rng(4)
+    x = backend.to_device(rng.random((4, 6, 5)))
+    basis = rng.random((3, 4))
+    expected = NumpyBackend("float32").bandmix(backend.to_host(x), basis)
+    for step in range(2 * code.MATRICES):
+        np.testing.assert_allclose(backend.to_host(backend.bandmix(x, basis)), expected, rtol=1e-6)
+        backend.bandmix(x, rng.random((2, 4)))                     # a one-off matrix each time
+    assert uploads.count((3, 4)) == 1 and uploads.count((2, 4)) == 2 * code.MATRICES
+
+
 @pytest.mark.parametrize("case", HOST_PATH_CASES)
 def test_host_code_primitives_on_both_paths(case, path):
     assert_case(case, "float32", opencl("float32", PATH_BACKEND[path]), seed=4, tolerance=HOST_PATH_CASES[case])

@@ -294,6 +294,8 @@ def test_bench_breakdown_splits_every_configuration_and_sets_the_fft_floor_besid
     assert rows["--rank 3"]["rank"] == 3 and rows["--rank 3"]["one_off_share"][bench_breakdown.POWER] > 0
     assert rows["default"]["per_iteration"][bench_breakdown.PRIOR] > 0
     assert rows["--algorithm admm"]["per_iteration"][bench_breakdown.SPLITS] > 0
+    assert rows["--algorithm admm"]["one_off_share"][bench_breakdown.SETUP] > 0
+    assert rows["default"]["one_off_share"][bench_breakdown.SETUP] == 0
     assert "together / FFT floor" in capsys.readouterr().out
 
 

@@ -11,7 +11,7 @@ opaque parts (a basis check's transforms count as the check's, its power iterati
 parts, per iteration:
 
 - transforms: every scipy.fft call the solve's thread makes (the pruned forward and adjoint; ADMM's DCT along λ
-  runs in row blocks on worker threads and counts as its splits);
+  is part of its division and counts as its splits);
 - filter mix, pad and crop: the rest of A and Aᵀ (the gradient step, the data term of the residual);
 - prior and constraint: the prox (TV and v ≥ 0 are one fused pass; in a subspace, B·c and Bᵀ· with it);
 - momentum: FISTA's restart test and extrapolation;
@@ -21,7 +21,8 @@ parts, per iteration:
 - other: the rest of the solve (its records, the result, the tracker).
 
 and the one-off parts, as a share of the whole solve: moves between spaces (building a subspace's filters,
-mapping the iterates), power iterations for L, the prior weight's re-estimation. The FFT floor is the iteration's
+mapping the iterates), power iterations for L, the prior weight's re-estimation, ADMM's set-up (its splitting,
+the penalties' terms, the start's splits). The FFT floor is the iteration's
 own 4r real 2-D transforms of the field (2 rfft2 + 2 irfft2 of r bands, r the rank the solve ended in; K in band
 space), measured in the same run (``bench_iteration.floor_timer``: pocketfft on the host, so NumPy's only). A
 row's figure is seconds per iteration over the whole solve, so a configuration that starts in band space
@@ -58,6 +59,8 @@ from clsdcam.priors import ProxAverage  # noqa: E402
 from clsdcam.problem import Problem  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
 from clsdcam.solver import Settings, Solver  # noqa: E402
+from clsdcam.spaces import Spaces  # noqa: E402
+from clsdcam.splitting import Splitting  # noqa: E402
 from clsdcam.subspace import SpectralSubspace  # noqa: E402
 
 TRANSFORMS = "transforms"
@@ -71,8 +74,9 @@ OTHER = "other"
 MOVES = "moves between spaces"
 POWER = "power iterations"
 WEIGHTS = "weight re-estimation"
+SETUP = "ADMM's set-up"
 PER_ITERATION = (TRANSFORMS, FILTERS, PRIOR, MOMENTUM, OBJECTIVE, BASIS, SPLITS, OTHER)
-ONE_OFF = (MOVES, POWER, WEIGHTS)
+ONE_OFF = (MOVES, POWER, WEIGHTS, SETUP)
 FFT_FUNCTIONS = ("fft", "ifft", "rfft", "irfft", "rfft2", "irfft2", "rfftn", "irfftn", "dct", "idct")
 
 # (owner, attribute, part, opaque): the functions wrapped; a rename in the package fails tests/test_tools.py
@@ -86,6 +90,10 @@ PARTS = [(scipy.fft, name, TRANSFORMS, False) for name in FFT_FUNCTIONS] + DEVIC
     (Fista, "_stats", MOMENTUM, False),
     (Fista, "_extrapolate", MOMENTUM, False),
     (Admm, "iterate", SPLITS, False),
+    (Splitting, "_divide", SPLITS, True),
+    (Spaces, "splitting", SETUP, True),
+    (Splitting, "set_penalties", SETUP, True),
+    (Splitting, "start", SETUP, True),
     (Checkpoints, "check", OBJECTIVE, True),
     (Checkpoints, "enter", OBJECTIVE, True),
     (Phases, "_check_width", BASIS, True),
@@ -99,10 +107,12 @@ PARTS = [(scipy.fft, name, TRANSFORMS, False) for name in FFT_FUNCTIONS] + DEVIC
 
 class Clock:
     """Exclusive seconds per part: a stack of the parts running, each charged its time minus its children's
-    (an opaque part's children are charged to it, except opaque ones)."""
+    (an opaque part's children are charged to it, except opaque ones), on the thread that made the clock (the
+    solve's: calls from row blocks on other threads are inside a part of it already)."""
 
     def __init__(self, now=time.perf_counter):
         self.now = now
+        self.thread = threading.current_thread()
         self.seconds: dict[str, float] = {}
         self._stack: list[list] = []            # [part, opaque, start, seconds charged elsewhere]
 
@@ -118,7 +128,7 @@ class Clock:
     @contextmanager
     def running(self, part: str, opaque: bool):
         inside_opaque = any(frame[1] for frame in self._stack)
-        if threading.current_thread() is not threading.main_thread() or (inside_opaque and not opaque):
+        if threading.current_thread() is not self.thread or (inside_opaque and not opaque):
             yield          # a row block's worker thread, or a plain part inside an opaque one: its caller's time
             return
         frame = [part, opaque, self.now(), 0.0]
@@ -205,7 +215,7 @@ def table(result: dict) -> str:
     tail = [
         "| **per-iteration parts, together** | " + " | ".join(f"**{whole[n]:.4f}**" for n in names) + " |",
         "| FFT floor: 4r transforms (r = the final rank) | "
-        + " | ".join(f"{floors[n] or 0:.4f} (r = {rows[n]['rank']})" if floors[n] else f"— (r = {rows[n]['rank']})"
+        + " | ".join(f"{floors[n]:.4f} (r = {rows[n]['rank']})" if floors[n] else f"— (r = {rows[n]['rank']})"
                      for n in names) + " |",
         "| together / FFT floor | " + " | ".join(f"{whole[n] / floors[n]:.1f}×" if floors[n] else "—"
                                                 for n in names) + " |",

@@ -40,20 +40,31 @@ def solve_seconds(args) -> float:
     return time.perf_counter() - start
 
 
+def child_argv(args) -> list[str]:
+    """The solve's options, for the child."""
+    return ["--scene", args.scene, "--size", args.size, "--bands", str(args.bands), "--seed", str(args.seed),
+            "--rank", str(args.rank), "--algorithm", args.algorithm, "--iters", str(args.iters)]
+
+
 def run_child(checkout: Path, argv: list[str]) -> float:
     env = dict(os.environ, PYTHONPATH=str(checkout))
-    done = subprocess.run([sys.executable, __file__, "--child", *argv], env=env, capture_output=True, text=True,
-                          check=True)
+    done = subprocess.run([sys.executable, __file__, "--child", *argv], env=env, capture_output=True, text=True)
+    if done.returncode:
+        raise SystemExit(f"compare_speed: the solve on {checkout} failed:\n{done.stderr.strip()}")
     return json.loads(done.stdout.strip().splitlines()[-1])["seconds"]
 
 
-def compare(args, argv: list[str]) -> dict:
+def compare(args) -> dict:
+    """Pairs of solves, this checkout first in odd pairs and second in even ones (neither always warms the other)."""
     old = Path(args.old).resolve()
     if not (old / "clsdcam" / "__init__.py").is_file():
         raise SystemExit(f"compare_speed: {old} holds no clsdcam checkout")
-    pairs = []
+    argv, pairs = child_argv(args), []
     for index in range(args.pairs + 1):
-        new_s, old_s = run_child(HERE, argv), run_child(old, argv)
+        if index % 2:
+            new_s, old_s = run_child(HERE, argv), run_child(old, argv)
+        else:
+            old_s, new_s = run_child(old, argv), run_child(HERE, argv)
         if index:
             pairs.append((new_s, old_s))
         print(f"pair {index}{' (warm-up)' if not index else ''}: {new_s:.2f} s against {old_s:.2f} s",
@@ -63,7 +74,6 @@ def compare(args, argv: list[str]) -> dict:
 
 
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("old", nargs="?", help="the other checkout (its root, holding clsdcam/)")
     parser.add_argument("--scene", default="leds")
@@ -82,8 +92,7 @@ def main(argv=None) -> int:
         return 0
     if args.old is None:
         parser.error("the other checkout is required")
-    child_argv = [a for a in argv if a != args.old]
-    result = compare(args, child_argv)
+    result = compare(args)
     print("| pair | this checkout, s | other, s | ratio |\n|---:|---:|---:|---:|")
     for index, ((new, old), ratio) in enumerate(zip(result["pairs"], result["ratios"]), 1):
         print(f"| {index} | {new:.2f} | {old:.2f} | {ratio:.3f} |")

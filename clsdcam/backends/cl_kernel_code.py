@@ -30,7 +30,7 @@ class KernelCode:
     def __init__(self, backend):
         self.backend = backend
         self._band_cubes = None            # (shape, expanded, stepped) of subspace_tv
-        self._matrices: dict = {}          # (shape, digest) -> device copy, oldest first
+        self._matrices: dict = {}          # (shape, digest) -> device copy, least recently used first
 
     def convolution(self, transfer, filters, field_shape, skip_unseen: bool = True):
         """fft2 → cmul → ifft2 → mask_sum on whole cubes (``convolution.PrimitiveConvolution``)."""
@@ -71,15 +71,17 @@ class KernelCode:
     def _matrix(self, matrix):
         """The device copy of a small bandmix matrix, uploaded the first time it is seen (a subspace mixes by its
         basis and its transpose every iteration: a blocking upload each time would stall the queue twice an
-        iteration), the MATRICES last ones kept."""
+        iteration), the MATRICES last used kept."""
         be = self.backend
         host = np.ascontiguousarray(matrix, dtype=be.dtype)
         key = (host.shape, hashlib.blake2b(host.tobytes(), digest_size=16).digest())
-        if key not in self._matrices:
+        device = self._matrices.pop(key, None)
+        if device is None:
             if len(self._matrices) >= MATRICES:
-                del self._matrices[next(iter(self._matrices))]
-            self._matrices[key] = cla.to_device(be.queue, host, allocator=be.allocator)
-        return self._matrices[key]
+                del self._matrices[next(iter(self._matrices))]          # the least recently used
+            device = cla.to_device(be.queue, host, allocator=be.allocator)
+        self._matrices[key] = device                                    # now the most recently used
+        return device
 
     def subspace_tv(self, c, basis, tau, weights, out=None):
         """Expand, the fused haar_tv with max(·, 0), project, through two band cubes kept for the last shape."""

@@ -210,8 +210,11 @@ class NumpyBackend:
         return host_linalg.gram(x)
 
     def bandmix(self, x, matrix, out=None):
-        """Written straight into ``out`` when it is a C-contiguous array of x's dtype not sharing x's memory."""
-        if out is not None and out.flags.c_contiguous and out.dtype == x.dtype and not np.shares_memory(out, x):
+        """Written straight into ``out`` when it is a C-contiguous array of the result's shape and x's dtype not
+        sharing x's memory."""
+        shape = (np.shape(matrix)[0],) + x.shape[1:]
+        if (out is not None and out.shape == shape and out.flags.c_contiguous and out.dtype == x.dtype
+                and not np.shares_memory(out, x)):
             return host_linalg.bandmix(x, matrix, out=out)
         return _result(out, host_linalg.bandmix(x, matrix))
 
