@@ -94,9 +94,9 @@ class Spaces:
         before = self.window(v) if judged else None
         z = self.model.adjoint(problem.residual_buffer, out=self._cube("z"), y=v, step=step)
         stepped = full.prox(z, step, self._cube("stepped"))
-        if not judged:
-            return None, None, self.window(stepped)
-        gain = (data - full.data(stepped)) / data if data > 0 else 0.0
+        gain = None
+        if judged:
+            gain = (data - full.data(stepped)) / data if data > 0 else 0.0
         return gain, before, self.window(stepped)
 
     def full_step_transforms(self, problem: Problem, judged: bool = True) -> int:

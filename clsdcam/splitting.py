@@ -105,7 +105,8 @@ def difference(v: np.ndarray, axis: int, out: np.ndarray, below=None) -> np.ndar
     are taken along each plane's rows as one run (long inner loops), the last column's then put right."""
     n = v.shape[axis]
     if axis == 2 and out.flags.c_contiguous:
-        np.subtract(_rows_run(v)[:, 1:], _rows_run(v)[:, :-1], out=_rows_run(out)[:, :-1])
+        run = _rows_run(v)
+        np.subtract(run[:, 1:], run[:, :-1], out=_rows_run(out)[:, :-1])
     else:
         np.subtract(v[_along(axis, slice(1, n))], v[_along(axis, slice(0, n - 1))],
                     out=out[_along(axis, slice(0, n - 1))])
