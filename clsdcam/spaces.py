@@ -11,7 +11,7 @@ import numpy as np
 
 from .priors import ProxAverage
 from .problem import Problem
-from .splitting import CalibrationTerms, Splitting, band_splitting
+from .splitting import CalibrationTerms, Splitting, SplittingBase
 from .subspace import SpectralSubspace
 
 
@@ -31,6 +31,19 @@ class LastLipschitz:
 
     def set(self, basis: np.ndarray, value: float):
         self.key, self.value = self.digest(basis), value
+
+
+def band_splitting(model, b, terms: CalibrationTerms, priors: list) -> SplittingBase:
+    """ADMM's steps in band space for ``priors`` (TV and L1: what ``Settings`` lets ADMM take) on the model's backend:
+    :class:`~clsdcam.splitting.Splitting` on NumPy, :class:`~clsdcam.kernel_splitting.KernelSplitting` (kernels) on
+    OpenCL."""
+    by_name = {prior.name: prior for prior in priors}
+    tv, l1, backend = by_name.get("tv"), by_name.get("l1"), model.backend
+    if backend.name == "opencl":
+        from .kernel_splitting import KernelSplitting
+
+        return KernelSplitting(model, b, terms, tv, l1)
+    return Splitting(model, backend.to_host(b), terms, tv, l1, backend.workers)
 
 
 class Spaces:
@@ -57,7 +70,7 @@ class Spaces:
         average = ProxAverage(self.backend, self.priors, self.model.cube_shape)
         return Problem(self.model, self.b, average.prox, average.value, self.n_bands, splitting=self.splitting)
 
-    def splitting(self) -> Splitting:
+    def splitting(self) -> SplittingBase:
         """ADMM's closed-form steps for band space (TV and L1 priors only)."""
         return band_splitting(self.model, self.b, self._terms(), self.priors)
 

@@ -158,6 +158,7 @@ class CalibrationTerms:
         self.transfer = transfer_function(model.psf, model.geometry).astype(self.cdtype)
         self.transfer_power = np.abs(self.transfer.astype(np.complex128)) ** 2
         self._last = None           # ((penalties, TV axes), (gains, μ₁conj(Ĥ), divisors))
+        self._uploads: dict = {}    # term name -> (backend, host array, its device copy)
 
     def for_penalties(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ), 1/(μ₁|Ĥ|² + μ₂(|d̂_y|² + |d̂_x|² + Λ_j) + μ₃)), TV's terms on ``axes`` only."""
@@ -165,6 +166,15 @@ class CalibrationTerms:
         if self._last is None or self._last[0] != key:
             self._last = (key, self._penalty_terms(p, axes))
         return self._last[1]
+
+    def on_device(self, backend, name: str, host: np.ndarray, complex_: bool = False):
+        """``host``, the term called ``name``, on ``backend``'s device: uploaded once, and again only when the backend
+        or the host array (new penalties, new terms) is another."""
+        kept = self._uploads.get(name)
+        if kept is None or kept[0] is not backend or kept[1] is not host:
+            kept = (backend, host, backend.to_device(host, complex_))
+            self._uploads[name] = kept
+        return kept[2]
 
     def _penalty_terms(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         gain = (self.filters / (p.data + self.filter_energy)).astype(self.dtype)
@@ -179,47 +189,66 @@ class CalibrationTerms:
         return gain, data_transfer, (1.0 / (spatial[None] + spectral[:, None, None] + p.nonneg)).astype(self.dtype)
 
 
-class Splitting:
-    """ADMM's steps for one band-space problem (see the module docstring), on NumPy arrays.
+class SplittingBase:
+    """What ADMM's steps share on every backend: the problem's shapes and scales, and the penalties with what depends
+    on them. ``model``: the band space's :class:`~clsdcam.model.ForwardModel`; ``terms`` its
+    :class:`CalibrationTerms`; ``tv`` the :class:`~clsdcam.priors.TotalVariation` prior or None, ``l1`` the
+    :class:`~clsdcam.priors.Sparsity` prior or None (their weights are read at every step: an automatic weight chosen
+    mid-solve takes effect at once). A backend's steps (:class:`Splitting` on NumPy,
+    :class:`clsdcam.kernel_splitting.KernelSplitting` on OpenCL) add ``start``, ``c_step``, ``splits`` and ``convolve``."""
 
-    ``model``: the band space's :class:`~clsdcam.model.ForwardModel` (its geometry); ``b`` the normalised
-    measurement; ``terms`` the :class:`CalibrationTerms` of that model; ``tv`` the
-    :class:`~clsdcam.priors.TotalVariation` prior or None, ``l1`` the :class:`~clsdcam.priors.Sparsity` prior or None
-    (their weights are read at every step: an automatic weight chosen mid-solve takes effect at once).
-    """
-
-    def __init__(self, model, b: np.ndarray, terms: CalibrationTerms, tv=None, l1=None, workers: int = 1):
+    def __init__(self, model, terms: CalibrationTerms, tv=None, l1=None):
         self.terms = terms
         self.dtype, self.cdtype = terms.dtype, terms.cdtype
         self.field_shape = model.field_shape
         self.sensor_shape = model.sensor_shape
         self.shape = model.cube_shape
         self.n_bands = model.n_bands
-        self.workers = workers
-        self.b = np.asarray(b, self.dtype)
-        self.filters, self.filter_energy = terms.filters, terms.filter_energy
-        self.transfer, self.transfer_power = terms.transfer, terms.transfer_power
         self.tv, self.l1 = tv, l1
         self.axes = [axis for axis, weight in enumerate(tv.axis_weights) if weight > 0] if tv is not None else []
         self.penalties: Penalties | None = None
-        self.chunk = max(1, FFT_CHUNK_BYTES // (self.field_shape[0] * (self.field_shape[1] // 2 + 1) *
-                                                np.dtype(self.cdtype).itemsize))
 
     # ---- the problem's scales ------------------------------------------------------------------------------
     @property
     def data_curvature(self) -> float:
         """The mean of ‖f_p‖² over the sensor: the x-step's curvature from the data term."""
-        return float(np.mean(self.filter_energy))
+        return float(np.mean(self.terms.filter_energy))
 
     @property
     def transfer_peak(self) -> float:
         """max |Ĥ|² (the DC gain squared for a non-negative PSF)."""
-        return float(self.transfer_power.max())
+        return float(self.terms.transfer_power.max())
 
     def set_penalties(self, penalties: Penalties):
         """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`)."""
         self.penalties = penalties
         self._gain, self._data_transfer, self._inverse = self.terms.for_penalties(penalties, self.axes)
+
+    def threshold(self, axis: int) -> float:
+        """The u-step's soft threshold τw_d/μ₂ along ``axis``."""
+        return self.tv.weight * self.tv.axis_weights[axis] / self.penalties.tv
+
+    def nonneg_shift(self) -> float:
+        """The w-step's shift τ₁/μ₃ (0 without the L1 prior)."""
+        return self.l1.weight / self.penalties.nonneg if self.l1 is not None else 0.0
+
+    def iterate(self, state) -> tuple[float, tuple[float, float]]:
+        """The c-step then the splits: (½‖b − SFHv‖² at the new v, (‖w⁺ − w‖², ‖w⁺‖²))."""
+        self.c_step(state)
+        return self.splits(state)
+
+
+class Splitting(SplittingBase):
+    """ADMM's steps for one band-space problem (see the module docstring) on NumPy arrays, in row blocks on
+    ``workers`` threads; ``b`` the normalised measurement."""
+
+    def __init__(self, model, b: np.ndarray, terms: CalibrationTerms, tv=None, l1=None, workers: int = 1):
+        super().__init__(model, terms, tv, l1)
+        self.workers = workers
+        self.b = np.asarray(b, self.dtype)
+        self.filters, self.transfer = terms.filters, terms.transfer
+        self.chunk = max(1, FFT_CHUNK_BYTES // (self.field_shape[0] * (self.field_shape[1] // 2 + 1) *
+                                                np.dtype(self.cdtype).itemsize))
 
     # ---- the state -----------------------------------------------------------------------------------------
     def start(self, v0: np.ndarray) -> tuple[SplitState, float]:
@@ -238,11 +267,6 @@ class Splitting:
         return state, data
 
     # ---- one iteration -------------------------------------------------------------------------------------
-    def iterate(self, state: SplitState) -> tuple[float, tuple[float, float]]:
-        """The c-step then the splits: (½‖b − SFHv‖² at the new v, (‖w⁺ − w‖², ‖w⁺‖²))."""
-        self.c_step(state)
-        return self.splits(state)
-
     def c_step(self, state: SplitState) -> None:
         """v and Hv from the right-hand side the last splits left (x − ξ in ``hv``, the rest in ``rest``)."""
         self._add_tv_adjoint(state)
@@ -290,7 +314,7 @@ class Splitting:
         p = self.penalties
         q = np.add(state.v[:, y0:y1], state.rho[:, y0:y1], out=state.rho[:, y0:y1])
         new = scratch_buffer(scratch, "w", q.shape, q.dtype)
-        shift = self.l1.weight / p.nonneg if self.l1 is not None else 0.0
+        shift = self.nonneg_shift()
         np.subtract(q, shift, out=new) if shift else np.copyto(new, q)
         np.maximum(new, 0, out=new)
         old = state.w[:, y0:y1]
@@ -314,7 +338,7 @@ class Splitting:
                 difference(block, axis, q)
             eta = state.eta[i, :, y0:y1]
             q += eta
-            threshold = self.tv.weight * self.tv.axis_weights[axis] / self.penalties.tv
+            threshold = self.threshold(axis)
             np.clip(q, -threshold, threshold, out=eta)
             np.subtract(q, eta, out=state.s[i, :, y0:y1])
             state.s[i, :, y0:y1] -= eta
@@ -362,10 +386,3 @@ class Splitting:
         """Hv = irfft2(Ĥ·rfft2(v)) (the start's; 2K transforms)."""
         return scipy.fft.irfft2(scipy.fft.rfft2(v, workers=self.workers) * self.transfer, s=self.field_shape,
                                 workers=self.workers)
-
-
-def band_splitting(model, b, terms: CalibrationTerms, priors: list) -> Splitting:
-    """The :class:`Splitting` of band space for ``priors`` (TV and L1: what ``Settings`` lets ADMM take)."""
-    by_name = {prior.name: prior for prior in priors}
-    return Splitting(model, model.backend.to_host(b), terms, by_name.get("tv"), by_name.get("l1"),
-                     model.backend.workers)

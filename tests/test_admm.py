@@ -247,8 +247,3 @@ def test_the_carry_follows_the_measurements_units(leds):
 def test_what_admm_refuses_in_settings(settings, message):
     with pytest.raises(InputError, match=message):
         Settings(algorithm="admm", **settings)
-
-
-def test_admm_refuses_opencl_for_now(leds):
-    with pytest.raises(InputError, match="runs on the NumPy backend for now"):
-        admm.Admm(type("OpenCL", (), {"name": "opencl"})(), np.zeros(3), 1.0, None)

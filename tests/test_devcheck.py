@@ -101,3 +101,13 @@ def test_auto_takes_vkfft_on_a_gpu_when_installed(monkeypatch, installed):
     if really or not installed:
         x = np.random.default_rng(0).random((2, 16, 24), np.float32)
         assert np.allclose(gpu.to_host(gpu.ifft2(gpu.fft2(gpu.to_device(x)), x.shape[1:])), x, atol=1e-5)
+
+
+def test_the_reconstruction_rows_check_each_algorithm_on_each_path():
+    """FISTA (every prior, band space then a subspace) and ADMM (TV and L1) each solve on every path the device runs
+    and match NumPy."""
+    paths = (["host"] if cl_devices.is_cpu(DEVICE) else []) + ["device"]
+    rows = devcheck.reconstruction_rows({path: opencl.OpenCLBackend("float32", device=DEVICE, path=path)
+                                         for path in paths})
+    assert [row.name.split(",")[0] for row in rows] == ["fista"] * len(paths) + ["admm"] * len(paths)
+    assert all(row.ok and row.name.endswith(f"({path} path)") for row, path in zip(rows, paths * 2))

@@ -154,14 +154,25 @@ def test_auto_chooses_an_opencl_gpu_and_says_which(scenes, tmp_path, monkeypatch
     assert asked == ["opencl"]
 
 
-def test_auto_runs_admm_on_numpy_even_with_a_gpu(scenes, tmp_path, monkeypatch, capsys):
-    """ADMM has no OpenCL kernels yet: ``--backend auto`` takes NumPy for it, says why, and solves."""
+def test_auto_gives_admm_the_gpu_and_numpy_to_an_algorithm_without_opencl(scenes, tmp_path, monkeypatch, capsys):
+    """ADMM runs on OpenCL: ``--backend auto`` asks for the GPU as for FISTA. An algorithm whose ``backends`` leave
+    OpenCL out (ADMM made so here) gets NumPy, said in one line, and solves."""
+    import clsdcam.solver
+    from clsdcam.algorithms.admm import Admm
+    from clsdcam.backends.numpy import NumpyBackend
+
     fake_opencl(monkeypatch, "GPU")
-    assert reconstruct(scenes, "small", "small", tmp_path / "a.h5", "--iters", "3", "--algorithm", "admm",
-                       "--quiet") == 0
+    asked = []
+    monkeypatch.setattr(clsdcam.solver, "get_backend", lambda name, dtype, *rest: asked.append(name) or
+                        NumpyBackend(dtype))
+    common = ("--iters", "3", "--algorithm", "admm", "--quiet")
+    assert reconstruct(scenes, "small", "small", tmp_path / "gpu.h5", *common) == 0
+    assert "(auto: a GPU was found)" in capsys.readouterr().out and asked == ["opencl"]
+    monkeypatch.setattr(Admm, "backends", ("numpy",), raising=False)
+    assert reconstruct(scenes, "small", "small", tmp_path / "a.h5", *common) == 0
     assert "backend: numpy (auto: --algorithm admm runs on NumPy)\n" in capsys.readouterr().out
     with h5py.File(tmp_path / "a.h5", "r") as f:
-        assert f.attrs["algorithm"] == "admm" and f.attrs["backend"] == "numpy" and f.attrs["iterations"] == 3
+        assert f.attrs["algorithm"] == "admm" and f.attrs["iterations"] == 3 and asked == ["opencl", "numpy"]
 
 
 @pytest.mark.parametrize("kinds", [(), ("CPU",)])

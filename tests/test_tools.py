@@ -305,9 +305,11 @@ def test_bench_breakdown_on_opencl_finishes_the_queue_and_leaves_the_host_floor_
     assert bench_breakdown.main(["--backend", "opencl", "--size", "24x32", "--bands", "8", "--iters", "20",
                                  "--ranks", "", "--json", str(out)]) == 0
     rows = json.loads(out.read_text())["configurations"]
-    assert set(rows) == {"default", "--subspace"}                 # ADMM runs on NumPy only
+    assert set(rows) == {"default", "--subspace", "--algorithm admm"}
     assert all(row["fft_floor"] is None and row["per_iteration"][bench_breakdown.TRANSFORMS] > 0
                for row in rows.values())
+    admm = rows["--algorithm admm"]                               # its kernels' passes and its set-up are charged
+    assert admm["per_iteration"][bench_breakdown.SPLITS] > 0 and admm["one_off_share"][bench_breakdown.SETUP] > 0
     assert "opencl: " in capsys.readouterr().out
 
 

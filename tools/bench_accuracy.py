@@ -38,9 +38,22 @@ HAND = ("psf/diffusercam_tutorial_psf_sample.tif", "psf/diffusercam_tutorial_raw
 HAND_BIN, DARK_CORNER = 4, (slice(5, 15), slice(5, 15))
 
 
+class Where:
+    """The backend every :func:`solve` runs on: ``numpy``, or ``opencl`` on the device clsdcam picks (PYOPENCL_CTX
+    names another); the tools' ``--backend`` sets it (:func:`add_backend_option`)."""
+
+    backend = "numpy"
+
+
+def add_backend_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--backend", default="numpy", choices=("numpy", "opencl"),
+                        help="where every solve runs (opencl: the device clsdcam picks; PYOPENCL_CTX names another)")
+
+
 def solve(calibration, measurement, fields: dict, marks) -> tuple[dict, dict]:
-    """{iteration: cube} at ``marks`` and the result's attributes (plus seconds per iteration)."""
-    solver = Solver(calibration, settings=Settings(iters=max(marks), **fields))
+    """{iteration: cube} at ``marks`` and the result's attributes (plus seconds per iteration), on
+    :attr:`Where.backend`."""
+    solver = Solver(calibration, backend=Where.backend, settings=Settings(iters=max(marks), **fields))
     start = time.perf_counter()
     result = solver.solve(measurement, snapshots=marks)
     attrs = {key: result.attrs[key] for key in ("tv", "final_rank", "fft_work_saved", "noise_estimate")
@@ -249,14 +262,16 @@ def main(argv=None) -> int:
     parser.add_argument("--hand", action="store_true", help="also the real hand (K = 1) from ../shared/data")
     parser.add_argument("--hand-tv", type=float, default=1e-4, help="--tv of the hand's long --no-skip reference")
     parser.add_argument("--hand-reference-iters", type=int, default=1000)
+    add_backend_option(parser)
     args = parser.parse_args(argv)
+    Where.backend = args.backend
     marks = [int(m) for m in args.marks.split(",")]
     sweep = [float(t) for t in args.sweep.split(",") if t]
     ranks = [int(r) for r in args.ranks.split(",") if r]
     algorithms = [a for a in args.algorithms.split(",") if a]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    results = {"size": size_text(args.size), "bands": args.bands, "marks": marks, "scenes": {}}
+    results = {"size": size_text(args.size), "bands": args.bands, "marks": marks, "backend": args.backend, "scenes": {}}
     for scene in (s for s in args.scenes.split(",") if s):      # --scenes "": the hand alone
         results["scenes"][scene] = run_scene(scene, args.size, args.bands, marks, sweep, ranks, algorithms)
         save_json(out, "accuracy", results)

@@ -2,7 +2,7 @@
 """Where a solve's time goes, part by part, beside the FFT floor of the iteration's own transforms.
 
     python tools/bench_breakdown.py --size 320x448 --bands 64 --scene leds --iters 300 --ranks 8,16,23 --json b.json
-    python tools/bench_breakdown.py --backend opencl --no-admm ...     # a GPU: the queue finished at every boundary
+    python tools/bench_breakdown.py --backend opencl ...     # a GPU: the queue finished at every boundary
 
 Each configuration (the default, ``--subspace``, each forced ``--rank``, ``--algorithm admm``) is one solve of the
 simulated scene, timed by wrapping the package's own functions (:data:`PARTS`): a part's time is its wall-clock time
@@ -60,7 +60,7 @@ from clsdcam.problem import Problem  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
 from clsdcam.solver import Settings, Solver  # noqa: E402
 from clsdcam.spaces import Spaces  # noqa: E402
-from clsdcam.splitting import Splitting  # noqa: E402
+from clsdcam.splitting import Splitting, SplittingBase  # noqa: E402
 from clsdcam.subspace import SpectralSubspace  # noqa: E402
 
 TRANSFORMS = "transforms"
@@ -82,6 +82,11 @@ FFT_FUNCTIONS = ("fft", "ifft", "rfft", "irfft", "rfft2", "irfft2", "rfftn", "ir
 # (owner, attribute, part, opaque): the functions wrapped; a rename in the package fails tests/test_tools.py
 DEVICE_FFTS = [(engine, name, TRANSFORMS, False) for engine in (device_fft.HostFFT, device_fft.ReiknaFFT,
                                                                  device_fft.VkFFT) for name in ("forward", "inverse")]
+try:                                   # ADMM's kernels (needs pyopencl)
+    from clsdcam.kernel_splitting import KernelSplitting
+    KERNEL_SPLITTING = [(KernelSplitting, "_divide", SPLITS, True), (KernelSplitting, "start", SETUP, True)]
+except ImportError:
+    KERNEL_SPLITTING = []
 PARTS = [(scipy.fft, name, TRANSFORMS, False) for name in FFT_FUNCTIONS] + DEVICE_FFTS + [
     (Problem, "gradient_step", FILTERS, False),
     (Problem, "residual", FILTERS, False),
@@ -92,7 +97,7 @@ PARTS = [(scipy.fft, name, TRANSFORMS, False) for name in FFT_FUNCTIONS] + DEVIC
     (Admm, "iterate", SPLITS, False),
     (Splitting, "_divide", SPLITS, True),
     (Spaces, "splitting", SETUP, True),
-    (Splitting, "set_penalties", SETUP, True),
+    (SplittingBase, "set_penalties", SETUP, True),
     (Splitting, "start", SETUP, True),
     (Checkpoints, "check", OBJECTIVE, True),
     (Checkpoints, "enter", OBJECTIVE, True),
@@ -102,7 +107,7 @@ PARTS = [(scipy.fft, name, TRANSFORMS, False) for name in FFT_FUNCTIONS] + DEVIC
     (Phases, "_leave", MOVES, True),
     (ForwardModel, "lipschitz", POWER, True),
     (AutoWeights, "act", WEIGHTS, True),
-]
+] + KERNEL_SPLITTING
 
 
 class Clock:
@@ -192,7 +197,7 @@ def measure(args) -> dict:
     sim = simulate(scene=args.scene, shape=shape, n_bands=args.bands, seed=args.seed)
     ranks = [int(r) for r in args.ranks.split(",") if r]
     rows = {}
-    admm = not args.no_admm and args.backend in Admm.backends
+    admm = not args.no_admm
     for name, fields in configurations(ranks, admm).items():
         row = breakdown(sim, args.backend, fields, args.iters)
         row["fft_floor"] = floor_timer(row["rank"], tuple(row["field"]))() if args.backend == "numpy" else None
@@ -239,7 +244,7 @@ def main(argv=None) -> int:
     parser.add_argument("--iters", type=int, default=300)
     parser.add_argument("--ranks", default="8,16,23", help="forced ranks, one solve each ('' for none)")
     parser.add_argument("--no-admm", action="store_true",
-                        help="leave out --algorithm admm (left out anyway where it cannot run)")
+                        help="leave out --algorithm admm")
     parser.add_argument("--backend", default="numpy", choices=("numpy", "opencl"))
     parser.add_argument("--json")
     args = parser.parse_args(argv)

@@ -14,7 +14,7 @@ import argparse
 import json
 import sys
 
-from bench_accuracy import size_text
+from bench_accuracy import Where, add_backend_option, size_text
 from clsdcam.cli.options import size
 from clsdcam.metrics import bar_detail, psnr, spectral_angle
 from clsdcam.sim import simulate
@@ -26,8 +26,8 @@ QUADRANTS = ("red", "green", "blue", "white")
 
 
 def measure(sim, fields: dict, marks) -> list[dict]:
-    result = Solver(sim.calibration, settings=Settings(iters=max(marks), **fields)).solve(sim.measurement,
-                                                                                       snapshots=marks)
+    settings = Settings(iters=max(marks), **fields)
+    result = Solver(sim.calibration, backend=Where.backend, settings=settings).solve(sim.measurement, snapshots=marks)
     masks = in_window(sim.truth.shape[1:], quadrant_masks(inner_shape(sim.truth.shape[1:])))
     return [{"iteration": k, "seconds": result.history[k - 1]["seconds"], "psnr": psnr(cube, sim.truth),
              "angle": spectral_angle(cube, sim.truth), "detail": bar_detail(cube, sim.truth, masks)}
@@ -41,10 +41,12 @@ def main(argv=None) -> int:
     parser.add_argument("--marks", default="50,100,150,300")
     parser.add_argument("--configs", default="fista,admm", help=f"from {', '.join(CONFIGS)}")
     parser.add_argument("--json", default=None)
+    add_backend_option(parser)
     args = parser.parse_args(argv)
+    Where.backend = args.backend
     marks = sorted(int(m) for m in args.marks.split(","))
     sim = simulate("target", shape=args.size, n_bands=args.bands)
-    print(f"target, {size_text(args.size)}×{args.bands}")
+    print(f"target, {size_text(args.size)}×{args.bands}, backend {args.backend}")
     print("| configuration | iterations | s | PSNR dB | SA ° | bar detail " + " / ".join(QUADRANTS) + " |\n"
           "|---|---:|---:|---:|---:|---|")
     results = {}
@@ -55,7 +57,8 @@ def main(argv=None) -> int:
                   + " / ".join(f"{d:.2f}" for d in p["detail"]) + " |", flush=True)
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"size": size_text(args.size), "bands": args.bands, "runs": results}, f, indent=1)
+            json.dump({"size": size_text(args.size), "bands": args.bands, "backend": args.backend, "runs": results}, f,
+                      indent=1)
     return 0
 
 

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_accuracy import (ANGLE_MARGIN_DEG, PSNR_MARGIN_DB, panel_parser, report, save_json, scene_points, size_text,
-                            solve)
+from bench_accuracy import (ANGLE_MARGIN_DEG, PSNR_MARGIN_DB, Where, add_backend_option, panel_parser, report, save_json,
+                            scene_points, size_text, solve)
 from clsdcam.sim import band_wavelengths, shared_data_dir, simulate
 from clsdcam.sim.kinds import KINDS, make_kind, real_cubes
 
@@ -203,7 +203,9 @@ def main(argv=None) -> int:
     parser.add_argument("--only", type=int, default=None, metavar="I", help="replay scene I of the panel alone")
     parser.add_argument("--also", action="append", choices=list(ALSO), default=[],
                         help="also judge this speed option by the rule, on every scene (repeatable)")
+    add_backend_option(parser)
     args = parser.parse_args(argv)
+    Where.backend = args.backend
     if args.only is not None and not 0 <= args.only < args.scenes:
         parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
     kinds = panel_kinds()
@@ -212,7 +214,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "marks": marks, "also": args.also,
-               "scenes": []}
+               "backend": args.backend, "scenes": []}
     print(f"panel seed {seed}", file=sys.stderr, flush=True)
     for i, plan in enumerate(scene_plan(args.scenes, seed, kinds)):
         if args.only is not None and i != args.only:

@@ -13,14 +13,12 @@ balancing is not used: docs/admm.md).
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
 (:meth:`Admm.carry`, :meth:`Admm.resume`); a warm start from a cube (``x0``) starts its duals afresh. It runs in
-band space on the NumPy backend (``move`` refuses a change of space; OpenCL kernels for its passes are still to
-come).
+band space (``move`` refuses a change of space), on NumPy (``clsdcam.splitting.Splitting``) and on OpenCL
+(``clsdcam.kernel_splitting.KernelSplitting``).
 """
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
-
-import numpy as np
 
 from ..errors import InputError
 from .base import ratio
@@ -44,16 +42,13 @@ class Admm:
 
     name = "admm"
     monotone = False
-    backends = ("numpy",)          # no OpenCL kernels for its passes yet
     band_space_only = True         # no splitting of a spectral subspace yet
     priors = ("tv", "l1")          # the priors it has a closed-form step for (clsdcam.splitting)
 
     def __init__(self, backend, x0, step: float, rules):
-        if backend.name not in self.backends:
-            raise InputError("--algorithm admm runs on the NumPy backend for now (--backend numpy)")
         self.backend = backend
         self.step = step
-        self._start = np.array(x0, copy=True)
+        self._start = backend.copy(x0)
         self.splitting: "Splitting | None" = None
         self.state = None
         self._resumed = None
@@ -78,7 +73,7 @@ class Admm:
     def reset(self, point) -> None:
         """Start again from ``point`` with zero duals (the checkpoints' back-off)."""
         if self.splitting is None:
-            self._start = np.array(point, copy=True)
+            self._start = self.backend.copy(point)
             return
         self.state, _ = self.splitting.start(point)
 
@@ -90,7 +85,8 @@ class Admm:
         """Go on from a previous solve's splits and duals (:meth:`carry`), every array times ``factor`` (its units to
         this solve's: the problem is homogeneous in b), instead of starting the duals afresh."""
         for name in ("v", "hv", "xi", "rho", "w", "eta", "s", "rest"):
-            getattr(state, name)[...] *= factor
+            array = getattr(state, name)
+            self.backend.scale(factor, array, out=array)
         self._resumed = state
 
     def move(self, mapping) -> None:

@@ -1,0 +1,121 @@
+"""ADMM's steps on an OpenCL device: :class:`KernelSplitting`, the same iteration as ``clsdcam.splitting.Splitting``
+(whose docstring derives it) on device arrays, on either path.
+
+* the splits are three kernels of ``kernels/admm.cl``: the x-step (one work item per sensor pixel, which also sums
+  the data term), the w-step (which also sums ‖w⁺ − w‖² and ‖w⁺‖²) and the u-step (every active TV axis in one pass);
+* the c-step is the TV adjoint (one kernel), the backend's transforms (2K forward, 2K inverse), the right-hand side
+  in Fourier (one kernel), the DCT along λ and its inverse as the backend's ``bandmix`` by the orthonormal DCT-II
+  matrix on the spectrum's real and imaginary parts (a real K×K matrix mixes both alike), the division between them
+  (one kernel), and Ĥ·v̂ by ``cmul``.
+
+Two scalar reads an iteration (the two reductions); the calibration's and the penalties' terms are uploaded once per
+solver (``CalibrationTerms.on_device``).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.fft
+
+from .backends.cl_program import ints, total
+from .splitting import CalibrationTerms, SplitState, SplittingBase
+
+
+def dct_matrix(n: int) -> np.ndarray:
+    """C with C·x = the orthonormal DCT-II of x (``scipy.fft.dct(x, norm="ortho")``); Cᵀ is its inverse."""
+    return scipy.fft.dct(np.eye(n), type=2, norm="ortho", axis=0)
+
+
+def real_view(spectrum):
+    """A complex (K, Hp, Wq) device array as real (K, Hp, 2Wq): its real and imaginary parts side by side."""
+    return spectrum.view(np.finfo(spectrum.dtype).dtype)
+
+
+class KernelSplitting(SplittingBase):
+    """ADMM's steps for one band-space problem on an OpenCL backend (the module docstring); ``b`` the normalised
+    measurement on the device."""
+
+    def __init__(self, model, b, terms: CalibrationTerms, tv=None, l1=None):
+        super().__init__(model, terms, tv, l1)
+        self.backend = model.backend
+        self.kernels = self.backend.kernels
+        self.b = b
+        self.filters = terms.on_device(self.backend, "filters", terms.filters)
+        self.transfer = terms.on_device(self.backend, "transfer", terms.transfer, complex_=True)
+        self.dct = dct_matrix(self.n_bands)
+        self.mask = np.int32(sum(1 << axis for axis in self.axes))
+        self._rotated = None                     # the spectrum in DCT_λ order (the c-step's scratch)
+
+    def set_penalties(self, penalties):
+        """The penalties, and their terms on the device."""
+        super().set_penalties(penalties)
+        be, terms = self.backend, self.terms
+        self._gain = terms.on_device(be, "gain", self._gain)
+        self._data_transfer = terms.on_device(be, "data transfer", self._data_transfer, complex_=True)
+        self._inverse = terms.on_device(be, "divisors", self._inverse)
+
+    # ---- the state -----------------------------------------------------------------------------------------
+    def start(self, v0) -> tuple[SplitState, float]:
+        """The state from v = v0 with zero duals: Hv by one convolution (2K transforms), then every split's step;
+        and the data term at v0. Arrays every step writes before it reads them start uninitialised."""
+        be, cube = self.backend, self.shape
+        spectrum = (self.n_bands, self.field_shape[0], self.field_shape[1] // 2 + 1)
+        per_axis = (len(self.axes),) + cube
+        state = SplitState(v=be.copy(v0), hv=be.empty(cube), xi=be.zeros((self.n_bands,) + self.sensor_shape),
+                           rho=be.zeros(cube), w=be.zeros(cube), eta=be.zeros(per_axis), s=be.empty(per_axis),
+                           rest=be.empty(cube), spectra=(be.empty(spectrum, True), be.empty(spectrum, True)))
+        self._convolve(state.v, state.spectra[0], state.hv)
+        data, _ = self.splits(state)
+        return state, data
+
+    # ---- one iteration -------------------------------------------------------------------------------------
+    def c_step(self, state: SplitState) -> None:
+        """v and Hv from the right-hand side the last splits left (x − ξ in ``hv``, the rest in ``rest``)."""
+        be = self.backend
+        self._add_tv_adjoint(state)
+        data, rest = state.spectra
+        be.fft2(state.hv, out=data)
+        be.fft2(state.rest, out=rest)
+        self._divide(data, rest)
+        be.ifft2(data, self.field_shape, out=state.v)
+        be.ifft2(rest, self.field_shape, out=state.hv)
+
+    def splits(self, state: SplitState) -> tuple[float, tuple[float, float]]:
+        """The x-, w- and u-steps with their duals; the data term at v and (‖w⁺ − w‖², ‖w⁺‖²)."""
+        k, (h, w), (bands, hp, wp) = self.kernels, self.sensor_shape, self.shape
+        data = total(k.reduce("admm_x_step", h * w, state.hv, state.xi, self.filters, self._gain, self.b,
+                              *ints(bands, w, hp, wp)))
+        step, norm = (total(row) for row in k.reduce("admm_w_step", state.v.size, state.v, state.rho, state.w,
+                                                     state.rest, self._real(self.nonneg_shift()),
+                                                     self._real(self.penalties.nonneg), outputs=2))
+        if self.axes:
+            limits = [self._real(self.threshold(axis) if axis in self.axes else 0.0) for axis in range(3)]
+            k.grid3("admm_u_step", self.shape, state.eta, state.s, state.v, *ints(bands, hp, wp), self.mask, *limits)
+        return self.backend.drained(data), (step, norm)
+
+    def _add_tv_adjoint(self, state: SplitState) -> None:
+        """rest += μ₂ΣD_dᵀs_d (one kernel)."""
+        if self.axes:
+            self.kernels.grid3("admm_tv_adjoint", self.shape, state.rest, state.s, *ints(*self.shape), self.mask,
+                               self._real(self.penalties.tv))
+
+    def _divide(self, data, rest) -> None:
+        """data ← v̂ = Cᵀ[C(μ₁conj(Ĥ)·data + rest)·divisor] (C the DCT along λ), rest ← Ĥ·v̂."""
+        be, k = self.backend, self.kernels
+        plane = data.shape[1] * data.shape[2]
+        k.grid2("admm_rhs", plane, self.n_bands, data, rest, self._data_transfer, np.int32(plane))
+        if self._rotated is None or self._rotated.shape != data.shape:
+            self._rotated = be.empty(data.shape, True)
+        be.bandmix(real_view(data), self.dct, out=real_view(self._rotated))
+        k.grid1("admm_divide", data.size, self._rotated, self._inverse, np.int64(data.size))
+        be.bandmix(real_view(self._rotated), self.dct.T, out=real_view(data))
+        be.cmul(data, self.transfer, out=rest)
+
+    def _convolve(self, v, spectrum, out):
+        """Hv = irfft2(Ĥ·rfft2(v)) into ``out`` (2K transforms), ``spectrum`` its scratch."""
+        be = self.backend
+        be.fft2(v, out=spectrum)
+        be.cmul(spectrum, self.transfer, out=spectrum)
+        return be.ifft2(spectrum, self.field_shape, out=out)
+
+    def _real(self, value):
+        return self.dtype.type(value)

@@ -1,0 +1,137 @@
+/* ADMM's passes over the field (clsdcam/splitting.py derives them; clsdcam/kernel_splitting.py launches them).
+ * Cubes are (K, Hp, Wp) C-contiguous; the sensor window (H, W) sits at the field's origin; ξ, the filters f and the
+ * x-step's gains g = f/(μ₁ + ‖f‖²) are (K, H, W); b is (H, W). The split arrays η and s hold one cube per active TV
+ * axis, in axis order (λ, y, x). Differences along λ stop at the last band; along y and x they are circular. */
+
+/* admm_x_step, a reduction (reduce.cl) over the n = H·W sensor pixels: with q_k = hv_k + ξ_k at pixel p,
+ *   ξ_k ← −g_k·(b − Σ_j f_j·q_j),   hv_k ← q_k − 2·ξ_k   (= x − ξ⁺, the next c-step's data term);
+ * partial sums of ½(Σ_k f_k·hv_k − b)², the data term at v (before the step). Sums over k in ACC. */
+__kernel void admm_x_step(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
+                          __global REAL *hv, __global REAL *xi, __global const REAL *f, __global const REAL *gain,
+                          __global const REAL *b, int K, int W, int Hp, int Wp)
+{
+    ACC s = 0, c = 0;
+    size_t plane = (size_t)Hp * Wp;
+    FOR_TERMS(p) {
+        size_t at = (p / W) * Wp + p % W;
+        ACC fitted = 0, stepped = 0;
+        for (int k = 0; k < K; ++k) {
+            REAL fk = f[k * n + p], h = hv[k * plane + at];
+            fitted += (ACC)fk * (ACC)h;
+            stepped += (ACC)fk * (ACC)(h + xi[k * n + p]);
+        }
+        REAL misfit = b[p] - (REAL)stepped;
+        for (int k = 0; k < K; ++k) {
+            REAL q = hv[k * plane + at] + xi[k * n + p], e = -gain[k * n + p] * misfit;
+            xi[k * n + p] = e;
+            hv[k * plane + at] = q - (REAL)2 * e;
+        }
+        ACC r = fitted - (ACC)b[p];
+        acc_add(&s, &c, (ACC)0.5 * r * r);
+    }
+    store_partial(partial, group_reduce(s - c, scratch, 0));
+}
+
+/* admm_w_step, a reduction over the n = K·Hp·Wp elements: with q = v + ρ,
+ *   w⁺ = max(q − shift, 0),   ρ ← q − w⁺,   rest ← μ₃(w⁺ − ρ)   (the next right-hand side's start);
+ * partial sums of ‖w⁺ − w‖² (output 0) and ‖w⁺‖² (output 1). NaN propagates, as np.maximum. */
+__kernel void admm_w_step(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
+                          __global const REAL *v, __global REAL *rho, __global REAL *w, __global REAL *rest,
+                          REAL shift, REAL mu)
+{
+    ACC s0 = 0, c0 = 0, s1 = 0, c1 = 0;
+    FOR_TERMS(i) {
+        REAL q = v[i] + rho[i], z = q - shift;
+        z = z < 0 ? (REAL)0 : z;
+        REAL d = w[i] - z;
+        acc_add(&s0, &c0, (ACC)d * (ACC)d);
+        acc_add(&s1, &c1, (ACC)z * (ACC)z);
+        w[i] = z;
+        q -= z;
+        rho[i] = q;
+        rest[i] = mu * (z - q);
+    }
+    store_partial_of(partial, 0, group_reduce(s0 - c0, scratch, 0));
+    store_partial_of(partial, 1, group_reduce(s1 - c1, scratch, 0));
+}
+
+/* The element (k, y, x) of a (K, Hp, Wp) cube. */
+inline size_t admm_at(int k, int y, int x, int Hp, int Wp)
+{
+    return ((size_t)k * Hp + y) * Wp + x;
+}
+
+/* (D_axis v) at (k, y, x): the next element along the axis minus this one (0 at the last band). */
+inline REAL forward_difference(__global const REAL *v, int axis, int k, int y, int x, int K, int Hp, int Wp)
+{
+    REAL here = v[admm_at(k, y, x, Hp, Wp)];
+    if (axis == 0) return k + 1 < K ? v[admm_at(k + 1, y, x, Hp, Wp)] - here : (REAL)0;
+    if (axis == 1) return v[admm_at(k, y + 1 == Hp ? 0 : y + 1, x, Hp, Wp)] - here;
+    return v[admm_at(k, y, x + 1 == Wp ? 0 : x + 1, Hp, Wp)] - here;
+}
+
+/* admm_u_step: for each active axis d (bit d of mask) with its threshold t_d = τw_d/μ₂ and q = D_d v + η_d,
+ *   η_d ← clip(q, ±t_d),   s_d ← q − 2η_d   (= u_d − η_d⁺, soft(q, t_d) being q − clip(q, ±t_d)).
+ * Grid (x, y, k) over (Wp, Hp, K), x and y rounded up (bounds-checked). */
+__kernel void admm_u_step(__global REAL *eta, __global REAL *s, __global const REAL *v, int K, int Hp, int Wp,
+                          int mask, REAL t0, REAL t1, REAL t2)
+{
+    int x = get_global_id(0), y = get_global_id(1), k = get_global_id(2);
+    if (x >= Wp || y >= Hp) return;
+    size_t cube = (size_t)K * Hp * Wp, i = admm_at(k, y, x, Hp, Wp), at = i;
+    REAL limits[3] = {t0, t1, t2};
+    for (int axis = 0; axis < 3; ++axis) {
+        if (!((mask >> axis) & 1)) continue;
+        REAL q = forward_difference(v, axis, k, y, x, K, Hp, Wp) + eta[at], t = limits[axis];
+        REAL e = q < -t ? -t : (q > t ? t : q);
+        eta[at] = e;
+        s[at] = (q - e) - e;
+        at += cube;
+    }
+}
+
+/* admm_tv_adjoint: rest += μ₂·Σ_d D_dᵀ s_d over the active axes (bit d of mask), with (D_dᵀu)_i = u_{i−1} − u_i
+ * (along λ u_{−1} = 0 and u_{K−1} unused; circular along y and x), each axis's two terms added in NumPy's order.
+ * Grid (x, y, k) over (Wp, Hp, K), x and y rounded up (bounds-checked). */
+__kernel void admm_tv_adjoint(__global REAL *rest, __global const REAL *s, int K, int Hp, int Wp, int mask, REAL mu)
+{
+    int x = get_global_id(0), y = get_global_id(1), k = get_global_id(2);
+    if (x >= Wp || y >= Hp) return;
+    size_t cube = (size_t)K * Hp * Wp, i = admm_at(k, y, x, Hp, Wp);
+    __global const REAL *u = s;
+    REAL r = rest[i];
+    for (int axis = 0; axis < 3; ++axis) {
+        if (!((mask >> axis) & 1)) continue;
+        if (axis == 0) {
+            if (k + 1 < K) r -= mu * u[i];
+            if (k > 0) r += mu * u[admm_at(k - 1, y, x, Hp, Wp)];
+        } else {
+            size_t before = axis == 1 ? admm_at(k, y == 0 ? Hp - 1 : y - 1, x, Hp, Wp)
+                                      : admm_at(k, y, x == 0 ? Wp - 1 : x - 1, Hp, Wp);
+            r -= mu * u[i];
+            r += mu * u[before];
+        }
+        u += cube;
+    }
+    rest[i] = r;
+}
+
+/* admm_rhs: X_i ← X_i·T_{i mod plane} + R_i on complex spectra (K, plane), T = μ₁conj(Ĥ) (plane): the c-step's
+ * right-hand side in Fourier. Grid (i, k) as cmul's. */
+__kernel void admm_rhs(__global REAL2 *X, __global const REAL2 *R, __global const REAL2 *T, int plane)
+{
+    int i = get_global_id(0);
+    size_t at = get_global_id(1) * plane + i;
+    if (i >= plane) return;
+    REAL2 a = X[at], t = T[i], r = R[at];
+    X[at] = (REAL2)(a.x * t.x - a.y * t.y + r.x, a.x * t.y + a.y * t.x + r.y);
+}
+
+/* admm_divide: X_i ← X_i·d_i, a complex spectrum by a real one of the same shape (the c-step's divisors 1/(…) in
+ * DCT_λ order). 1-D grid over the n complex elements (rounded up, bounds-checked). */
+__kernel void admm_divide(__global REAL2 *X, __global const REAL *d, long n)
+{
+    size_t i = get_global_id(0);
+    if (i >= n) return;
+    X[i] = X[i] * d[i];
+}
