@@ -8,8 +8,9 @@
   matrix on the spectrum's real and imaginary parts (a real K×K matrix mixes both alike), the division between them
   (one kernel), and Ĥ·v̂ by ``cmul``.
 
-Two scalar reads an iteration (the two reductions); the calibration's and the penalties' terms are uploaded once per
-solver (``CalibrationTerms.on_device``).
+Two scalar reads an iteration (the two reductions; on the host path each ``bandmix`` also maps its buffers, two
+more waits for the queue); the calibration's and the penalties' terms are uploaded once per solver
+(``CalibrationTerms.on_device``).
 """
 from __future__ import annotations
 

@@ -21,6 +21,8 @@ __all__ = ["ForwardModel", "default_field_shape", "window_offset"]
 
 POWER_ITERS = 30          # at most, for the Lipschitz constant
 POWER_TOL = 1e-4          # stop once the Rayleigh quotient moves less than this (relative)
+REFRESH_FLAT = 0.01       # a refreshed basis's start: the flat cube's weight beside the old eigenvector, mapped
+REFRESH_TOL = 1e-3        # and its tolerance, a tenth of the margin (clsdcam.spaces.Spaces.onto)
 
 
 class ForwardModel:
@@ -71,10 +73,13 @@ class ForwardModel:
         """The sensor-sized window of a device field cube, on the host: (K, H, W)."""
         return self.backend.to_host(self.backend.crop(v, self.sensor_shape, self.offset))
 
-    def lipschitz(self, margin: float = 1.01, iters: int = POWER_ITERS, tol: float = POWER_TOL, start=None) -> float:
-        """L ≈ margin · λmax(AᵀA) by power iteration from the flat cube (the DC mode dominates), plus ``start``
-        when given (a unit device cube near the dominant vector, e.g. a related model's: the flat part keeps
-        every direction in play).
+    def lipschitz(self, margin: float = 1.01, iters: int = POWER_ITERS, tol: float = POWER_TOL, start=None,
+                  flat: float = 1.0, expected: float | None = None) -> float:
+        """L ≈ margin · λmax(AᵀA) by power iteration from ``flat`` times the unit flat cube (the DC mode dominates)
+        plus ``start`` when given (a unit device cube near the dominant vector, e.g. a related model's: the flat
+        part keeps every direction in play; a start known to be close, as a refreshed basis's, takes a faint one,
+        REFRESH_FLAT). ``expected``: the L that start came with (the old basis's), the estimate the first pass is
+        compared with: a refresh whose L has not moved stops after one pass (five or six passes each before).
 
         λ_j = ⟨v, AᵀAv⟩ / ⟨v, v⟩,  v ← AᵀAv / ‖AᵀAv‖, until λ moves less than ``tol`` (relative);
         the Rayleigh quotient is a lower bound, hence the small safety margin (the solver's
@@ -82,13 +87,12 @@ class ForwardModel:
         related model's iteration from it).
         """
         be = self.backend
-        flat = np.full(self.cube_shape, 1.0 / np.sqrt(np.prod(self.cube_shape)), dtype=be.dtype)
-        v = be.to_device(flat)
+        v = be.to_device(np.full(self.cube_shape, flat / np.sqrt(np.prod(self.cube_shape)), dtype=be.dtype))
         if start is not None:
             be.axpy(1.0, start, v, out=v)
         w = be.empty(self.cube_shape)
         b = be.empty(self.sensor_shape)
-        eigenvalue = 0.0
+        eigenvalue = expected / margin if expected else 0.0
         for _ in range(iters):
             self.adjoint(self.forward(v, out=b), out=w)
             previous, eigenvalue = eigenvalue, be.vdot(v, w) / be.vdot(v, v)

@@ -28,7 +28,7 @@ class Problem:
         self.rank = rank
         self.subspace = subspace
         self.residual_buffer = self.backend.empty(model.sensor_shape)
-        self._splitting = splitting      # () -> clsdcam.splitting.Splitting: ADMM's closed-form steps (band space)
+        self._splitting = splitting      # () -> clsdcam.splitting.SplittingBase: ADMM's closed-form steps (band space)
 
     def gradient_step(self, y, out, step: float) -> float:
         """out = y − step·A_sᵀ(A_s y − b) (fused in the adjoint); returns f(y) = ½‖A_s y − b‖²."""
@@ -63,7 +63,7 @@ class Problem:
         return self.backend.nonneg(cube, out=cube)
 
     def splitting(self):
-        """ADMM's closed-form steps for this problem (:class:`clsdcam.splitting.Splitting`); InputError where the
+        """ADMM's closed-form steps for this problem (:class:`clsdcam.splitting.SplittingBase`); InputError where the
         space has none."""
         if self._splitting is None:
             raise InputError("--algorithm admm runs in band space: no --subspace or --rank")

@@ -177,7 +177,8 @@ class Solver:
         """Devices with their own memory say up front (InputError) when the problem cannot fit."""
         check = getattr(self.backend, "check_problem", None)
         if check is not None:
-            check(self.geometry.sensor, self.geometry.field, self.calibration.filters.shape[0])
+            cubes = getattr(ALGORITHMS[self.settings.algorithm], "field_buffers", None)
+            check(self.geometry.sensor, self.geometry.field, self.calibration.filters.shape[0], field_buffers=cubes)
 
     def _bands_line(self):
         return bands_line(self.calibration.filters) if self.settings.skip else None

@@ -9,6 +9,7 @@ from typing import Callable
 
 import numpy as np
 
+from .model import REFRESH_FLAT, REFRESH_TOL
 from .priors import ProxAverage
 from .problem import Problem
 from .splitting import CalibrationTerms, Splitting, SplittingBase
@@ -74,19 +75,35 @@ class Spaces:
         """ADMM's closed-form steps for band space (TV and L1 priors only)."""
         return band_splitting(self.model, self.b, self._terms(), self.priors)
 
-    def subspace(self, basis: np.ndarray, start=None) -> Problem:
-        """The problem on ``basis`` (its L by a power iteration from ``start``, unless the last basis was the same)."""
-        sub = SpectralSubspace(self.model, basis, self.priors, self.filters, start, self._last.get(basis))
+    def subspace(self, basis: np.ndarray, power: dict | None = None) -> Problem:
+        """The problem on ``basis``: its L by a power iteration started as ``power`` says
+        (:class:`~clsdcam.subspace.SpectralSubspace`), else from band space's eigenvector projected onto the basis
+        beside the flat cube; none when the last basis was the same."""
+        known = self._last.get(basis)
+        if power is None and known is None:
+            power = {"start": self._unit(self.backend.bandmix(self.model.power_vector, basis.T))}
+        sub = SpectralSubspace(self.model, basis, self.priors, self.filters, power, known, scratch=self._cube)
         self._last.set(basis, sub.lipschitz)
         return Problem(sub.model, self.b, sub.prox, sub.penalty, sub.rank, subspace=sub)
 
+    def _unit(self, c):
+        """c/‖c‖ (None when c is zero)."""
+        norm = np.sqrt(self.backend.vdot(c, c))
+        return self.backend.scale(1.0 / norm, c, out=c) if norm > 0 else None
+
     def onto(self, problem: Problem, basis: np.ndarray) -> tuple[Problem, object]:
         """The problem on another ``basis`` and the mapping of ``problem``'s coefficients to it, c ↦ B'ᵀB·c (lossless
-        when span(B') ⊇ span(B)); its power iteration starts from the old one's eigenvector, mapped."""
+        when span(B') ⊇ span(B)). A refresh (no wider than the old basis) starts its power iteration from the old
+        eigenvector, mapped, with a faint flat part and a looser tolerance (REFRESH_FLAT, REFRESH_TOL: the old
+        dominant direction stays near the new one), its first estimate compared with the old L; a wider basis, whose dominant direction may lie in its new
+        columns, starts as a first subspace does."""
         be, subspace = self.backend, problem.subspace
         mix = basis.T @ subspace.basis
         vector = getattr(subspace.model, "power_vector", None)      # none when its L was known (no power iteration)
-        moved = self.subspace(basis, start=None if vector is None else be.bandmix(vector, mix))
+        start = None if vector is None else self._unit(be.bandmix(vector, mix))
+        refresh = start is not None and basis.shape[1] <= subspace.rank
+        power = {"start": start, "flat": REFRESH_FLAT, "tol": REFRESH_TOL, "expected": subspace.lipschitz}
+        moved = self.subspace(basis, power if refresh else None)
         return moved, lambda c: be.bandmix(c, mix)
 
     def to_band(self, problem: Problem):
@@ -117,7 +134,7 @@ class Spaces:
         return problem.transforms() // 2 + (band if judged else band // 2)
 
     def _cube(self, name: str):
-        """A band cube for the checks (allocated at the first)."""
+        """A band cube for the checks and the subspaces' expansions (allocated at the first use of its name)."""
         if name not in self._buffers:
             self._buffers[name] = self.backend.empty(self.model.cube_shape)
         return self._buffers[name]

@@ -36,8 +36,9 @@ of the split, z − dual⁺ = 2z − q, is formed in the same pass, and neither 
 * non-negativity: ρ⁺ = q − w and μ₃(w − ρ⁺), the start of the next right-hand side, to which one more pass adds
   μ₂ΣD_dᵀs_d.
 
-Both passes and the spectral division run on cache-sized row blocks on the host's threads (``backends/blocks``): the
-iteration reads each cube about twice besides its transforms. The duals are scaled (ξ = λ/μ₁); the penalties are
+On NumPy (:class:`Splitting`) both passes and the spectral division run on cache-sized row blocks on the host's
+threads (``backends/blocks``): the iteration reads each cube about twice besides its transforms. On OpenCL they are
+kernels (:mod:`clsdcam.kernel_splitting`). The duals are scaled (ξ = λ/μ₁); the penalties are
 relative to the problem's own scales (:class:`Penalties`, :mod:`clsdcam.algorithms.admm`).
 """
 from __future__ import annotations
@@ -195,7 +196,7 @@ class SplittingBase:
     :class:`CalibrationTerms`; ``tv`` the :class:`~clsdcam.priors.TotalVariation` prior or None, ``l1`` the
     :class:`~clsdcam.priors.Sparsity` prior or None (their weights are read at every step: an automatic weight chosen
     mid-solve takes effect at once). A backend's steps (:class:`Splitting` on NumPy,
-    :class:`clsdcam.kernel_splitting.KernelSplitting` on OpenCL) add ``start``, ``c_step``, ``splits`` and ``convolve``."""
+    :class:`clsdcam.kernel_splitting.KernelSplitting` on OpenCL) add ``start``, ``c_step`` and ``splits``."""
 
     def __init__(self, model, terms: CalibrationTerms, tv=None, l1=None):
         self.terms = terms

@@ -111,3 +111,23 @@ def test_the_reconstruction_rows_check_each_algorithm_on_each_path():
                                          for path in paths})
     assert [row.name.split(",")[0] for row in rows] == ["fista"] * len(paths) + ["admm"] * len(paths)
     assert all(row.ok and row.name.endswith(f"({path} path)") for row, path in zip(rows, paths * 2))
+
+
+def test_admms_memory_plan_counts_its_own_cubes(monkeypatch):
+    """A device that holds FISTA's solve but not ADMM's: the solver refuses ``--algorithm admm`` up front (one
+    InputError with the bands that would fit) and builds FISTA's; the plans differ by ADMM's extra field cubes."""
+    from clsdcam import Settings, Solver
+    from clsdcam.algorithms.admm import Admm
+    from clsdcam.errors import InputError
+    from clsdcam.sim import simulate
+
+    sim = simulate(scene="leds", shape=(32, 40), n_bands=4, seed=3)
+    field = Solver(sim.calibration, backend="numpy").geometry.field
+    fista, _ = cl_devices.problem_bytes(sim.calibration.filters.shape[1:], field, 4)
+    admm, _ = cl_devices.problem_bytes(sim.calibration.filters.shape[1:], field, 4, field_buffers=Admm.field_buffers)
+    assert admm - fista == (Admm.field_buffers - cl_devices.FIELD_BUFFERS) * 4 * field[0] * field[1] * 4
+    report_memory(monkeypatch, (fista + admm) // 2)
+    backend = opencl.OpenCLBackend("float32", device=DEVICE, path="device")
+    assert Solver(sim.calibration, backend=backend, settings=Settings(iters=1)).lipschitz > 0
+    with pytest.raises(InputError, match="4 bands on a .* bands of that field fit"):
+        Solver(sim.calibration, backend=backend, settings=Settings(iters=1, algorithm="admm"))

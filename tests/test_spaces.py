@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from clsdcam.backends.numpy import NumpyBackend
+from clsdcam import model as model_module
 from clsdcam.model import ForwardModel
 from clsdcam.priors import build_priors
 from clsdcam.settings import Settings
@@ -65,3 +66,55 @@ def test_the_check_takes_one_exact_full_proximal_gradient_step(spaces):
     assert unjudged[:2] == (None, None)
     np.testing.assert_array_equal(unjudged[2], stepped)          # the same step, without A·x⁺ and v's window
     assert spaces.full_step_transforms(sub, judged=False) == 4 * 4 // 2 + 4 * 8 // 2
+
+
+def passes(model, monkeypatch) -> list:
+    """The forward passes ``model``'s power iterations make, counted into the returned list (one entry each)."""
+    counted, forward = [], model.forward
+    monkeypatch.setattr(model, "forward", lambda *a, **k: counted.append(1) or forward(*a, **k))
+    return counted
+
+
+def test_a_start_near_the_dominant_vector_with_a_faint_flat_part_converges_in_fewer_passes(spaces, monkeypatch):
+    """From band space's eigenvector projected onto the basis, the power iteration at the refresh's tolerance takes
+    fewer passes with REFRESH_FLAT of the flat cube than with all of it, and those fewer than from the flat cube
+    alone; each ends within that tolerance of a 200-pass estimate (a lower bound)."""
+    basis = orthonormal(3, seed=7)
+    model = spaces.subspace(basis).subspace.model
+    exact = model.lipschitz(iters=200, tol=0.0)
+    start = spaces._unit(BACKEND.bandmix(spaces.model.power_vector, basis.T))
+    counted, found = passes(model, monkeypatch), {}
+    for name, power in {"faint": dict(start=start, flat=model_module.REFRESH_FLAT), "even": dict(start=start),
+                        "cold": {}}.items():
+        counted.clear()
+        found[name] = (model.lipschitz(tol=model_module.REFRESH_TOL, **power), len(counted))
+    assert found["faint"][1] < found["even"][1] < found["cold"][1]
+    assert all(exact * (1 - model_module.REFRESH_TOL) <= value <= exact for value, _ in found.values())
+
+
+def test_a_first_subspace_starts_from_band_spaces_vector_and_only_a_refresh_from_the_old_one(spaces, monkeypatch):
+    """A new subspace's power iteration starts from band space's eigenvector projected (the flat cube at full weight,
+    the usual tolerance); moving to a basis of the same rank starts from the old eigenvector with a faint flat part,
+    the refresh's tolerance and the old L to compare with; a wider basis starts as a new subspace does."""
+    calls, lipschitz = [], ForwardModel.lipschitz
+    monkeypatch.setattr(ForwardModel, "lipschitz", lambda self, **k: calls.append(k) or lipschitz(self, **k))
+    first = spaces.subspace(orthonormal(3, seed=9))
+    spaces.onto(first, orthonormal(3, seed=10))
+    spaces.onto(first, orthonormal(4, seed=11))
+    assert [sorted(k) for k in calls] == [["start"], ["expected", "flat", "start", "tol"], ["start"]]
+    assert all(k["start"] is not None for k in calls) and calls[1]["flat"] == model_module.REFRESH_FLAT
+    assert calls[1]["expected"] == first.subspace.lipschitz
+
+
+def test_a_refresh_whose_lipschitz_constant_has_not_moved_takes_one_pass(spaces, monkeypatch):
+    """A basis turned by 1e-5 from the last: its L equals the old one to the refresh's tolerance, so one power pass
+    confirms it (the estimate stays within that tolerance of a 200-pass one)."""
+    basis = orthonormal(3, seed=12)
+    first = spaces.subspace(basis)
+    turned = np.linalg.qr(basis + 1e-5 * np.random.default_rng(13).standard_normal(basis.shape))[0]
+    counted, forward = [], ForwardModel.forward
+    monkeypatch.setattr(ForwardModel, "forward", lambda self, *a, **k: counted.append(1) or forward(self, *a, **k))
+    moved, _ = spaces.onto(first, turned)
+    monkeypatch.undo()
+    exact = moved.subspace.model.lipschitz(iters=200, tol=0.0)
+    assert len(counted) == 1 and exact * (1 - model_module.REFRESH_TOL) <= moved.subspace.lipschitz <= exact

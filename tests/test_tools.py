@@ -324,3 +324,25 @@ def test_compare_speed_pairs_two_checkouts_and_refuses_a_folder_without_one(tmp_
     assert "median ratio" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="no clsdcam checkout"):
         compare_speed.main([str(tmp_path), "--pairs", "1"])
+
+
+def test_bench_panel_on_opencl_gives_numpys_figures(tmp_path, monkeypatch):
+    """``--backend opencl``: every solve of one replayed scene (FISTA and ADMM) runs on one OpenCL backend made for
+    the run, recorded as such, and its PSNRs and angles equal NumPy's to 1e-3."""
+    pytest.importorskip("pyopencl")
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    monkeypatch.setattr(bench_accuracy.Where, "backend", "numpy")
+    runs = {}
+    for backend in ("numpy", "opencl"):
+        out = tmp_path / backend
+        bench_panel.main(["--size", "24x32", "--bands", "8", "--scenes", "2", "--only", "1", "--marks", "3,6",
+                          "--sweep", "0", "--seed", "7", "--also", "algorithm admm", "--backend", backend,
+                          "--out", str(out)])
+        results = json.loads((out / "panel.json").read_text())
+        assert results["backend"] == backend
+        runs[backend] = results["scenes"][0]["runs"]
+    assert bench_accuracy.Where.backend.name == "opencl"
+    for name, run in runs["numpy"].items():
+        for ours, theirs in zip(runs["opencl"][name]["points"], run["points"]):
+            assert ours["psnr"] == pytest.approx(theirs["psnr"], abs=1e-3)
+            assert ours["angle"] == pytest.approx(theirs["angle"], abs=1e-3)

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from clsdcam.analysis import peak_wavelength
+from clsdcam.backends import get_backend
 from clsdcam.cli.options import size
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.sim import noiseless_measurement, shared_data_dir, simulate
@@ -39,10 +40,15 @@ HAND_BIN, DARK_CORNER = 4, (slice(5, 15), slice(5, 15))
 
 
 class Where:
-    """The backend every :func:`solve` runs on: ``numpy``, or ``opencl`` on the device clsdcam picks (PYOPENCL_CTX
-    names another); the tools' ``--backend`` sets it (:func:`add_backend_option`)."""
+    """The backend every :func:`solve` runs on: ``numpy``, or an OpenCL backend on the device clsdcam picks
+    (PYOPENCL_CTX names another), made once for the run (its context, program and FFT plans); the tools'
+    ``--backend`` sets it (:func:`add_backend_option`, :meth:`use`)."""
 
     backend = "numpy"
+
+    @classmethod
+    def use(cls, name: str) -> None:
+        cls.backend = name if name == "numpy" else get_backend(name)
 
 
 def add_backend_option(parser: argparse.ArgumentParser) -> None:
@@ -264,7 +270,7 @@ def main(argv=None) -> int:
     parser.add_argument("--hand-reference-iters", type=int, default=1000)
     add_backend_option(parser)
     args = parser.parse_args(argv)
-    Where.backend = args.backend
+    Where.use(args.backend)
     marks = [int(m) for m in args.marks.split(",")]
     sweep = [float(t) for t in args.sweep.split(",") if t]
     ranks = [int(r) for r in args.ranks.split(",") if r]

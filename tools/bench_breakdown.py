@@ -84,7 +84,8 @@ DEVICE_FFTS = [(engine, name, TRANSFORMS, False) for engine in (device_fft.HostF
                                                                  device_fft.VkFFT) for name in ("forward", "inverse")]
 try:                                   # ADMM's kernels (needs pyopencl)
     from clsdcam.kernel_splitting import KernelSplitting
-    KERNEL_SPLITTING = [(KernelSplitting, "_divide", SPLITS, True), (KernelSplitting, "start", SETUP, True)]
+    KERNEL_SPLITTING = [(KernelSplitting, "_divide", SPLITS, True), (KernelSplitting, "start", SETUP, True),
+                        (KernelSplitting, "set_penalties", SETUP, True)]
 except ImportError:
     KERNEL_SPLITTING = []
 PARTS = [(scipy.fft, name, TRANSFORMS, False) for name in FFT_FUNCTIONS] + DEVICE_FFTS + [

@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     parser.add_argument("--json", default=None)
     add_backend_option(parser)
     args = parser.parse_args(argv)
-    Where.backend = args.backend
+    Where.use(args.backend)
     marks = sorted(int(m) for m in args.marks.split(","))
     sim = simulate("target", shape=args.size, n_bands=args.bands)
     print(f"target, {size_text(args.size)}×{args.bands}, backend {args.backend}")

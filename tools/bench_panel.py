@@ -205,7 +205,7 @@ def main(argv=None) -> int:
                         help="also judge this speed option by the rule, on every scene (repeatable)")
     add_backend_option(parser)
     args = parser.parse_args(argv)
-    Where.backend = args.backend
+    Where.use(args.backend)
     if args.only is not None and not 0 <= args.only < args.scenes:
         parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
     kinds = panel_kinds()

@@ -24,12 +24,12 @@ from ..errors import InputError
 from .base import ratio
 
 if TYPE_CHECKING:                 # the parser lists the algorithms: splitting's SciPy is imported when one solves
-    from ..splitting import Penalties, Splitting
+    from ..splitting import Penalties, SplittingBase
 
 DATA, TV, NONNEG = 1e-2, 1e-2, 1e-2
 
 
-def penalties_for(split: "Splitting") -> "Penalties":
+def penalties_for(split: "SplittingBase") -> "Penalties":
     """The penalties from the problem's scales (the module docstring)."""
     from ..splitting import Penalties
 
@@ -42,6 +42,10 @@ class Admm:
 
     name = "admm"
     monotone = False
+    # field cubes it keeps, for the device's memory plan (cl_devices.problem_bytes): v, Hv, ρ, w, the rest, η and s
+    # on three axes (11), three spectra (the c-step's two and the DCT's) with the divisors (3.5), the start (1), the
+    # model's field and a scratch (2); FISTA keeps 6
+    field_buffers = 18
     band_space_only = True         # no splitting of a spectral subspace yet
     priors = ("tv", "l1")          # the priors it has a closed-form step for (clsdcam.splitting)
 
@@ -49,7 +53,7 @@ class Admm:
         self.backend = backend
         self.step = step
         self._start = backend.copy(x0)
-        self.splitting: "Splitting | None" = None
+        self.splitting: "SplittingBase | None" = None
         self.state = None
         self._resumed = None
 

@@ -19,8 +19,9 @@ and keeps whatever iterates it needs. To the driver it is:
   momentum kept.
 
 What it cannot do yet it declares as class attributes, which ``Settings`` and ``--backend auto`` read (absent: no
-limit): ``backends`` (the backend names it runs on), ``band_space_only`` (no ``--subspace`` or ``--rank``) and
-``priors`` (the prior names it has a step for).
+limit): ``backends`` (the backend names it runs on; both built-in algorithms run on both), ``band_space_only`` (no
+``--subspace`` or ``--rank``) and ``priors`` (the prior names it has a step for). ``field_buffers``, the field cubes
+it keeps, sizes the device's memory plan (absent: FISTA's).
 
 Optionally, an algorithm with more state than its iterates keeps it across a video's frames: ``carry()`` returns it
 (or None) for :class:`clsdcam.state.SolverState`, and ``resume(carried, factor)`` takes it over before the first

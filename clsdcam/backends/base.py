@@ -131,8 +131,9 @@ class Platform(Protocol):
         ``mode`` "r" (read), "w" (write: its old contents may be lost) or "rw". Work queued before is done
         when the block starts; what the block writes is seen by work queued after it."""
 
-    def check_problem(self, sensor_shape, field_shape, n_bands: int) -> None:
-        """InputError (needed against available memory, and what to do) when one solve cannot fit."""
+    def check_problem(self, sensor_shape, field_shape, n_bands: int, field_buffers: int | None = None) -> None:
+        """InputError (needed against available memory, and what to do) when one solve cannot fit, its algorithm
+        keeping ``field_buffers`` field cubes (None: FISTA's)."""
 
     def fast_length(self, n: int) -> int:
         """The smallest length ≥ n the FFT engine transforms fast."""

@@ -155,14 +155,16 @@ def require_dtype(device, dtype) -> None:
 
 # ---- memory --------------------------------------------------------------------------------
 
-FIELD_BUFFERS = 6      # FISTA x, x_prev, y, z; the model's field; the prox scratch
+FIELD_BUFFERS = 6      # FISTA x, x_prev, y, z; the model's field; the prox scratch (an algorithm may say more)
 MOST_BANDS = 1024      # bands_that_fit looks no further
 
 
-def problem_bytes(sensor_shape, field_shape, n_bands: int, dtype="float32") -> tuple[int, int]:
+def problem_bytes(sensor_shape, field_shape, n_bands: int, dtype="float32",
+                  field_buffers: int | None = None) -> tuple[int, int]:
     """(total, largest single buffer) in bytes for one solve.
 
-    Field cubes K·Hp·Wp (FIELD_BUFFERS of them), the half spectrum K·Hp·(Wp/2+1) complex,
+    Field cubes K·Hp·Wp (``field_buffers`` of them: the algorithm's, FIELD_BUFFERS for FISTA), the half spectrum
+    K·Hp·(Wp/2+1) complex,
     filters K·H·W, and the FFT work: up to two full complex field cubes (the packed
     complex transform and its scratch).
     """
@@ -171,7 +173,7 @@ def problem_bytes(sensor_shape, field_shape, n_bands: int, dtype="float32") -> t
     field = n_bands * hp * wp * item
     spectrum = n_bands * hp * (wp // 2 + 1) * 2 * item
     fft_work = 2 * ((n_bands + 1) // 2) * hp * wp * 2 * item
-    total = FIELD_BUFFERS * field + spectrum + n_bands * h * w * item + fft_work + 8 * h * w * item
+    total = (field_buffers or FIELD_BUFFERS) * field + spectrum + n_bands * h * w * item + fft_work + 8 * h * w * item
     return total, max(field, spectrum, fft_work // 2)
 
 
@@ -203,25 +205,28 @@ def check_memory(device, needed: int, largest: int = 0) -> None:
         raise InputError(f"the problem {short}; {ADVICE}")
 
 
-def bands_that_fit(device, sensor_shape, field_shape, dtype="float32", most: int = MOST_BANDS) -> int:
+def bands_that_fit(device, sensor_shape, field_shape, dtype="float32", most: int = MOST_BANDS,
+                   field_buffers: int | None = None) -> int:
     """The most bands K ≤ ``most`` whose solve fits ``device`` (0 when not even one does): problem_bytes grows with
     K, so the answer is found by bisection on K."""
     low, high = 0, most              # K = low fits (or is 0), K = high + 1 does not (or is past most)
     while low < high:
         k = (low + high + 1) // 2
-        if shortfall(device, *problem_bytes(sensor_shape, field_shape, k, dtype)):
+        if shortfall(device, *problem_bytes(sensor_shape, field_shape, k, dtype, field_buffers)):
             high = k - 1
         else:
             low = k
     return low
 
 
-def check_problem(device, sensor_shape, field_shape, n_bands: int, dtype="float32") -> None:
-    """InputError, one line, when one solve of ``n_bands`` on ``field_shape`` does not fit ``device``: what it needs,
-    what the device has, and how many bands of that field would fit."""
-    short = shortfall(device, *problem_bytes(sensor_shape, field_shape, n_bands, dtype))
+def check_problem(device, sensor_shape, field_shape, n_bands: int, dtype="float32",
+                  field_buffers: int | None = None) -> None:
+    """InputError, one line, when one solve of ``n_bands`` on ``field_shape`` by an algorithm keeping
+    ``field_buffers`` field cubes (FISTA's by default) does not fit ``device``: what it needs, what the device has,
+    and how many bands of that field would fit."""
+    short = shortfall(device, *problem_bytes(sensor_shape, field_shape, n_bands, dtype, field_buffers))
     if short:
-        fit = bands_that_fit(device, sensor_shape, field_shape, dtype, n_bands)
+        fit = bands_that_fit(device, sensor_shape, field_shape, dtype, n_bands, field_buffers)
         field = "×".join(map(str, field_shape))
         raise InputError(f"{n_bands} bands on a {field} field {short}; at most {fit} bands of that field fit: "
                          f"{ADVICE}")

@@ -74,7 +74,7 @@ class NumpyBackend:
         """The array itself."""
         return nullcontext(array)
 
-    def check_problem(self, sensor_shape, field_shape, n_bands: int) -> None:
+    def check_problem(self, sensor_shape, field_shape, n_bands: int, field_buffers: int | None = None) -> None:
         """Host memory is not checked ahead (NumPy raises MemoryError where it runs out)."""
 
     # ---- FFT ----------------------------------------------------------------------------
@@ -129,7 +129,7 @@ class NumpyBackend:
         if out is None:
             return a * x + y
         if out is y:
-            out += a * x
+            out += x if a == 1 else a * x          # no temporary cube when a = 1
             return out
         np.multiply(x, a, out=out)
         out += y

@@ -88,8 +88,8 @@ class OpenCLBackend:
         """InputError (needed vs available MiB, and what to do) if the device cannot hold ``nbytes``."""
         check_memory(self.device, nbytes, largest)
 
-    def check_problem(self, sensor_shape, field_shape, n_bands: int) -> None:
-        check_problem(self.device, sensor_shape, field_shape, n_bands, self.dtype)
+    def check_problem(self, sensor_shape, field_shape, n_bands: int, field_buffers: int | None = None) -> None:
+        check_problem(self.device, sensor_shape, field_shape, n_bands, self.dtype, field_buffers)
 
     # ---- FFT ----------------------------------------------------------------------------
     def fast_length(self, n: int) -> int:
