@@ -461,14 +461,14 @@ def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_
     assert_reconstructs(simulation, priors, new_backend("float32", engine), RECONSTRUCTION[cl_tiny][2])
 
 
-def test_admm_resumes_a_video_frame_on_the_device_as_numpy_does(simulation, cl_tiny):
+def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(simulation, engine, cl_tiny):
     """A second frame (half as bright) resumes from the first's splits and duals, rescaled on the device: its cube
     matches NumPy's second frame to 1e-4 (relative L2), and the device's upload of the terms is made once."""
     from clsdcam import Settings, Solver
 
     settings, iters = Settings(iters=RECONSTRUCTION[cl_tiny][2], algorithm="admm", tv=3e-3), 5
     cubes, uploaded = [], []
-    for backend in (NumpyBackend("float32"), opencl("float32", "reikna")):
+    for backend in (NumpyBackend("float32"), new_backend("float32", engine)):
         solver = Solver(simulation.calibration, backend=backend, settings=settings)
         state = solver.solve(simulation.measurement).state
         assert state.carry is not None
