@@ -95,8 +95,8 @@ class Spaces:
         """The problem on another ``basis`` and the mapping of ``problem``'s coefficients to it, c ↦ B'ᵀB·c (lossless
         when span(B') ⊇ span(B)). A refresh (no wider than the old basis) starts its power iteration from the old
         eigenvector, mapped, with a faint flat part and a looser tolerance (REFRESH_FLAT, REFRESH_TOL: the old
-        dominant direction stays near the new one), its first estimate compared with the old L; a wider basis, whose dominant direction may lie in its new
-        columns, starts as a first subspace does."""
+        dominant direction stays near the new one), its first estimate compared with the old L; a wider basis,
+        whose dominant direction may lie in its new columns, starts as a first subspace does."""
         be, subspace = self.backend, problem.subspace
         mix = basis.T @ subspace.basis
         vector = getattr(subspace.model, "power_vector", None)      # none when its L was known (no power iteration)

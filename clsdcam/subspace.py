@@ -107,10 +107,11 @@ class SpectralSubspace:
 
     def __init__(self, model, basis: np.ndarray, priors: list, filters: np.ndarray, power: dict | None = None,
                  lipschitz: float | None = None, scratch=None):
-        """``power``: the power iteration's start for L (``ForwardModel.lipschitz``'s ``start``, ``flat``, ``tol``);
+        """``power``: how the power iteration for L starts (``ForwardModel.lipschitz``'s ``start``, ``flat``, ``tol``,
+        ``expected``);
         ``lipschitz``: L when already known for this basis (no power iteration); ``scratch(name)``: a band cube
         shared by every subspace of a solve (each expansion is read at once; a new 64-band cube's first touch
-        costs about 0.2 s at full size on a 2-core VM), else one allocated here."""
+        costs up to 0.25 s at full size on a 2-core VM), else one allocated here."""
         be = self.backend = model.backend
         self.basis = np.asarray(basis, dtype=np.float64)
         self.rank = self.basis.shape[1]

@@ -55,19 +55,13 @@ __kernel void admm_w_step(__global ACC *partial, __local ACC *scratch, long n, l
     store_partial_of(partial, 1, group_reduce(s1 - c1, scratch, 0));
 }
 
-/* The element (k, y, x) of a (K, Hp, Wp) cube. */
-inline size_t admm_at(int k, int y, int x, int Hp, int Wp)
-{
-    return ((size_t)k * Hp + y) * Wp + x;
-}
-
 /* (D_axis v) at (k, y, x): the next element along the axis minus this one (0 at the last band). */
 inline REAL forward_difference(__global const REAL *v, int axis, int k, int y, int x, int K, int Hp, int Wp)
 {
-    REAL here = v[admm_at(k, y, x, Hp, Wp)];
-    if (axis == 0) return k + 1 < K ? v[admm_at(k + 1, y, x, Hp, Wp)] - here : (REAL)0;
-    if (axis == 1) return v[admm_at(k, y + 1 == Hp ? 0 : y + 1, x, Hp, Wp)] - here;
-    return v[admm_at(k, y, x + 1 == Wp ? 0 : x + 1, Hp, Wp)] - here;
+    REAL here = v[at3(k, y, x, Hp, Wp)];
+    if (axis == 0) return k + 1 < K ? v[at3(k + 1, y, x, Hp, Wp)] - here : (REAL)0;
+    if (axis == 1) return v[at3(k, y + 1 == Hp ? 0 : y + 1, x, Hp, Wp)] - here;
+    return v[at3(k, y, x + 1 == Wp ? 0 : x + 1, Hp, Wp)] - here;
 }
 
 /* admm_u_step: for each active axis d (bit d of mask) with its threshold t_d = τw_d/μ₂ and q = D_d v + η_d,
@@ -78,12 +72,11 @@ __kernel void admm_u_step(__global REAL *eta, __global REAL *s, __global const R
 {
     int x = get_global_id(0), y = get_global_id(1), k = get_global_id(2);
     if (x >= Wp || y >= Hp) return;
-    size_t cube = (size_t)K * Hp * Wp, i = admm_at(k, y, x, Hp, Wp), at = i;
+    size_t cube = (size_t)K * Hp * Wp, at = at3(k, y, x, Hp, Wp);
     REAL limits[3] = {t0, t1, t2};
     for (int axis = 0; axis < 3; ++axis) {
         if (!((mask >> axis) & 1)) continue;
-        REAL q = forward_difference(v, axis, k, y, x, K, Hp, Wp) + eta[at], t = limits[axis];
-        REAL e = q < -t ? -t : (q > t ? t : q);
+        REAL q = forward_difference(v, axis, k, y, x, K, Hp, Wp) + eta[at], e = clip_to(q, limits[axis]);
         eta[at] = e;
         s[at] = (q - e) - e;
         at += cube;
@@ -97,17 +90,17 @@ __kernel void admm_tv_adjoint(__global REAL *rest, __global const REAL *s, int K
 {
     int x = get_global_id(0), y = get_global_id(1), k = get_global_id(2);
     if (x >= Wp || y >= Hp) return;
-    size_t cube = (size_t)K * Hp * Wp, i = admm_at(k, y, x, Hp, Wp);
+    size_t cube = (size_t)K * Hp * Wp, i = at3(k, y, x, Hp, Wp);
     __global const REAL *u = s;
     REAL r = rest[i];
     for (int axis = 0; axis < 3; ++axis) {
         if (!((mask >> axis) & 1)) continue;
         if (axis == 0) {
             if (k + 1 < K) r -= mu * u[i];
-            if (k > 0) r += mu * u[admm_at(k - 1, y, x, Hp, Wp)];
+            if (k > 0) r += mu * u[at3(k - 1, y, x, Hp, Wp)];
         } else {
-            size_t before = axis == 1 ? admm_at(k, y == 0 ? Hp - 1 : y - 1, x, Hp, Wp)
-                                      : admm_at(k, y, x == 0 ? Wp - 1 : x - 1, Hp, Wp);
+            size_t before = axis == 1 ? at3(k, y == 0 ? Hp - 1 : y - 1, x, Hp, Wp)
+                                      : at3(k, y, x == 0 ? Wp - 1 : x - 1, Hp, Wp);
             r -= mu * u[i];
             r += mu * u[before];
         }
@@ -124,7 +117,7 @@ __kernel void admm_rhs(__global REAL2 *X, __global const REAL2 *R, __global cons
     size_t at = get_global_id(1) * plane + i;
     if (i >= plane) return;
     REAL2 a = X[at], t = T[i], r = R[at];
-    X[at] = (REAL2)(a.x * t.x - a.y * t.y + r.x, a.x * t.y + a.y * t.x + r.y);
+    store_complex(X, at, a.x * t.x - a.y * t.y + r.x, a.x * t.y + a.y * t.x + r.y);
 }
 
 /* admm_divide: X_i ← X_i·d_i, a complex spectrum by a real one of the same shape (the c-step's divisors 1/(…) in
@@ -133,5 +126,6 @@ __kernel void admm_divide(__global REAL2 *X, __global const REAL *d, long n)
 {
     size_t i = get_global_id(0);
     if (i >= n) return;
-    X[i] = X[i] * d[i];
+    REAL2 a = X[i];
+    store_complex(X, i, a.x * d[i], a.y * d[i]);
 }
