@@ -79,7 +79,7 @@ class ForwardModel:
         plus ``start`` when given (a unit device cube near the dominant vector, e.g. a related model's: the flat
         part keeps every direction in play; a start known to be close, as a refreshed basis's, takes a faint one,
         REFRESH_FLAT). ``expected``: the L that start came with (the old basis's), the estimate the first pass is
-        compared with: a refresh whose L has not moved stops after one pass (five or six passes each before).
+        compared with: a refresh whose L has not moved stops after one pass.
 
         λ_j = ⟨v, AᵀAv⟩ / ⟨v, v⟩,  v ← AᵀAv / ‖AᵀAv‖, until λ moves less than ``tol`` (relative);
         the Rayleigh quotient is a lower bound, hence the small safety margin (the solver's
