@@ -188,7 +188,9 @@ def test_bench_panel_draws_fresh_scenes_of_every_kind_and_judges_both_rules(tmp_
     worst = f"{min(m for s, m in zip(results['scenes'], margins) if s['kind'] == 'piecewise'):+.2f}"
     assert f"| piecewise | 2 | {worst} / " in text
     assert bench_panel.scene_plan(5, 7) == bench_panel.scene_plan(5, 7) != bench_panel.scene_plan(5, 8)
-    assert (tmp_path / "panel.png").stat().st_size > 0
+    assert [title for title, _ in bench_panel.margin_panels(results)] == [
+        "default against --no-skip, worst mark", "chosen weight against the best fixed weight"]
+    assert (tmp_path / "panel.png").stat().st_size > 0 and (tmp_path / "curves.png").stat().st_size > 0
 
 
 def test_bench_panel_replays_one_scene_and_judges_a_speed_option(tmp_path, capsys, monkeypatch):
@@ -203,6 +205,10 @@ def test_bench_panel_replays_one_scene_and_judges_a_speed_option(tmp_path, capsy
     text = capsys.readouterr().out
     assert "`--support-field` against `--no-skip`" in text and text.count("| sparse | 1 |") == 2
     assert "\n| 2 | sparse |" in text
+    results = json.loads((tmp_path / "panel.json").read_text())
+    assert [title for title, _ in bench_panel.margin_panels(results)] == [          # no sweep: no empty panel
+        "default against --no-skip, worst mark", "--support-field against --no-skip, worst mark"]
+    assert (tmp_path / "curves.png").stat().st_size > 0
 
 
 def test_bench_panel_judges_admm_at_a_third_of_the_iterations(tmp_path, capsys, monkeypatch):

@@ -12,8 +12,9 @@ The rules, at every mark (accuracy.md's, permanent): the default's PSNR ≥ ``--
 spectral angle ≤ ``--no-skip``'s + 0.5°. The weight's rule, at the last mark: the default's PSNR ≥ the best fixed
 weight's − 0.5 dB and its angle ≤ that run's + 1°, the fixed weights spanning a decade either side of the one
 the default chose (``--sweep`` points, log-spaced). Per kind the table gives the worst and the median margin
-(positive: the rule holds by that much). Writes ``panel.json`` after every scene, ``panel.md`` and ``panel.png``
-(both rules' margins, every scene, one colour a kind). ``--also support-field`` (or ``subspace``) judges that
+(positive: the rule holds by that much). Writes ``panel.json`` after every scene, ``panel.md``, ``panel.png``
+(every rule's margins, every scene, one colour a kind) and ``curves.png`` (every scene's PSNR and angle at the
+marks, one line a configuration). ``--also support-field`` (or ``subspace``) judges that
 speed option by the same rule on every scene, ``--also 'algorithm admm'`` the other algorithm, at the same marks and
 at a third of them (its PSNR at mark m/3 against ``--no-skip``'s at m, for the marks that have their third);
 ``--only I`` replays scene I of a panel alone. Without real cubes
@@ -169,17 +170,31 @@ def markdown(results: dict) -> str:
     return "\n".join(lines + ["", "Every scene:", ""] + scene_rows(results))
 
 
-def plot(results: dict, path: Path):
-    """``panel.png``: every scene's two margins (PSNR, angle) for each rule, one colour a kind; a scene passes a
-    rule when its point lies in the upper right quadrant."""
+def margin_panels(results: dict) -> list[tuple[str, object]]:
+    """(title, margins) of every rule the panel judged: the default's, each ``--also`` option's, the sweep's."""
+    panels = [("default against --no-skip, worst mark", rule_margins)]
+    panels += [(f"--{name} against --no-skip, worst mark", partial(rule_margins, name=f"--{name}"))
+               for name in results.get("also", ())]
+    if any(sweep_margins(s) for s in results["scenes"]):
+        panels.append(("chosen weight against the best fixed weight", sweep_margins))
+    return panels
+
+
+def figure(width: float, height: float):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(10, 4.5), layout="constrained")
+    fig = Figure(figsize=(width, height), layout="constrained")
     FigureCanvasAgg(fig)
-    rules = [("default against --no-skip, worst mark", rule_margins),
-             ("chosen weight against the best fixed weight", sweep_margins)]
-    for ax, (title, margins) in zip(fig.subplots(1, 2), rules):
+    return fig
+
+
+def plot(results: dict, path: Path):
+    """``panel.png``: every scene's two margins (PSNR, angle) for each rule the panel judged, one colour a kind; a
+    scene passes a rule when its point lies in the upper right quadrant."""
+    panels = margin_panels(results)
+    fig = figure(5 * len(panels), 4.5)
+    for ax, (title, margins) in zip(np.atleast_1d(fig.subplots(1, len(panels))), panels):
         for kind in KINDS:
             found = kind_margins(results, kind, margins)
             if found:
@@ -191,6 +206,38 @@ def plot(results: dict, path: Path):
     fig.suptitle(f"Randomised panel, seed {results['seed']}, {results['size']}×{results['bands']}: "
                  "margins ≥ 0 pass", fontsize=10)
     fig.savefig(path, dpi=100)
+
+
+def plot_curves(results: dict, path: Path, per_row: int = 5):
+    """``curves.png``: every scene's PSNR (upper plot) and mean spectral angle (lower) at the marks, one line per
+    configuration judged (the sweep's fixed weights left out)."""
+    scenes = results["scenes"]
+    columns, rows = min(len(scenes), per_row), -(-len(scenes) // per_row)
+    fig = figure(3 * columns, 4.4 * rows)
+    axes = np.array(fig.subplots(2 * rows, columns, squeeze=False))
+    for i, scene in enumerate(scenes):
+        top, bottom = axes[2 * (i // per_row), i % per_row], axes[2 * (i // per_row) + 1, i % per_row]
+        for name, run in scene["runs"].items():
+            if name.startswith("--tv "):
+                continue
+            marks = [p["iteration"] for p in run["points"]]
+            style = dict(label=name, marker="o", ms=3, ls="--" if name == "default" else "-",
+                         zorder=3 if name == "default" else 2)      # over --no-skip's line when they agree
+            top.plot(marks, [p["psnr"] for p in run["points"]], **style)
+            bottom.plot(marks, [p["angle"] for p in run["points"]], **style)
+        top.set(title=f"{scene['index']}: {scene['kind']}, {scene['level']}", ylabel="PSNR (dB)")
+        bottom.set(xlabel="iterations", ylabel="mean spectral angle (°)")
+        for ax in (top, bottom):
+            ax.set_xscale("log")
+            ax.set_xticks(results["marks"], [str(m) for m in results["marks"]], fontsize=7)
+            ax.minorticks_off()
+    for i in range(len(scenes), rows * columns):
+        axes[2 * (i // per_row), i % per_row].set_visible(False)
+        axes[2 * (i // per_row) + 1, i % per_row].set_visible(False)
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(f"Randomised panel, seed {results['seed']}, {results['size']}×{results['bands']}: error at the marks",
+                 fontsize=10)
+    fig.savefig(path, dpi=90)
 
 
 def main(argv=None) -> int:
@@ -224,6 +271,7 @@ def main(argv=None) -> int:
         save_json(out, "panel", results)
     report(out, "panel", results, markdown(results))
     plot(results, out / "panel.png")
+    plot_curves(results, out / "curves.png")
     return 0
 
 
