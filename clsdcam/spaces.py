@@ -16,6 +16,18 @@ from .splitting import CalibrationTerms, Splitting, SplittingBase
 from .subspace import SpectralSubspace
 
 
+class BandMixing:
+    """The mapping c ↦ M·c along the band axis between two bases (``keeps_shape`` when M is square: an algorithm may
+    then hand it ``out``, an array of the iterates' shape that is not c, and keep its cubes)."""
+
+    def __init__(self, backend, matrix: np.ndarray):
+        self.backend, self.matrix = backend, matrix
+        self.keeps_shape = matrix.shape[0] == matrix.shape[1]
+
+    def __call__(self, c, out=None):
+        return self.backend.bandmix(c, self.matrix, out=out)
+
+
 class LastLipschitz:
     """The Lipschitz constant of the last spectral basis a solver used (a stream's next frame carries its basis:
     no second power iteration for it)."""
@@ -104,7 +116,7 @@ class Spaces:
         refresh = start is not None and basis.shape[1] <= subspace.rank
         power = {"start": start, "flat": REFRESH_FLAT, "tol": REFRESH_TOL, "expected": subspace.lipschitz}
         moved = self.subspace(basis, power if refresh else None)
-        return moved, lambda c: be.bandmix(c, mix)
+        return moved, BandMixing(be, mix)
 
     def to_band(self, problem: Problem):
         """The mapping of ``problem``'s iterates to band space, v = B·c (a new array)."""

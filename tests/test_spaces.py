@@ -118,3 +118,26 @@ def test_a_refresh_whose_lipschitz_constant_has_not_moved_takes_one_pass(spaces,
     monkeypatch.undo()
     exact = moved.subspace.model.lipschitz(iters=200, tol=0.0)
     assert len(counted) == 1 and exact * (1 - model_module.REFRESH_TOL) <= moved.subspace.lipschitz <= exact
+
+
+def test_fista_moves_to_a_basis_of_the_same_rank_in_its_own_arrays(spaces):
+    """Onto a basis of the same rank the mapping keeps the shape, and FISTA writes the mapped iterates into its own
+    four arrays (no new cubes), with the values of mapping each into a new one; onto a wider basis it takes new ones."""
+    from clsdcam.algorithms.fista import Fista
+    from clsdcam.driver import Rules
+
+    basis = orthonormal(3, seed=14)
+    first = spaces.subspace(basis)
+    rng = np.random.default_rng(15)
+    fista = Fista(BACKEND, np.zeros(first.subspace.cube_shape), 0.1, Rules())
+    fista.x, fista.x_prev, fista.y = (rng.standard_normal(first.subspace.cube_shape) for _ in range(3))
+    before = [fista.x, fista.x_prev, fista.y, fista.z]
+    _, mapping = spaces.onto(first, orthonormal(3, seed=16))
+    expected = [mapping(a) for a in before[:3]]
+    fista.move(mapping)
+    assert mapping.keeps_shape and {id(a) for a in before} == {id(a) for a in (fista.x, fista.x_prev, fista.y, fista.z)}
+    assert all(np.array_equal(got, want) for got, want in zip((fista.x, fista.x_prev, fista.y), expected))
+    _, wider = spaces.onto(first, orthonormal(4, seed=17))
+    fista.move(wider)
+    assert not wider.keeps_shape and fista.x.shape[0] == 4 and all(id(a) not in {id(b) for b in before}
+                                                                    for a in (fista.x, fista.x_prev, fista.y))

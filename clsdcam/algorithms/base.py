@@ -16,7 +16,8 @@ and keeps whatever iterates it needs. To the driver it is:
   ``restart``);
 * ``reset(point)``: every iterate to ``point``, any momentum afresh (the checkpoints' rollback);
 * ``move(mapping)``: every iterate through ``mapping`` (a change of space, e.g. onto a spectral basis), any
-  momentum kept.
+  momentum kept. A mapping with ``keeps_shape`` true also takes ``out=``, an array of the iterates' shape other
+  than its input, to write into (``clsdcam.spaces.BandMixing``).
 
 What it cannot do yet it declares as class attributes, which ``Settings`` and ``--backend auto`` read (absent: no
 limit): ``backends`` (the backend names it runs on; both built-in algorithms run on both), ``band_space_only`` (no

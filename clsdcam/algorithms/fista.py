@@ -72,8 +72,17 @@ class Fista:
         self.t = 1.0
 
     def move(self, mapping) -> None:
-        x, x_prev, y = (mapping(a) for a in (self.x, self.x_prev, self.y))
-        self._place([x, x_prev, y, x])
+        """x, x_prev and y through ``mapping``. One that keeps their shape (``keeps_shape``: a basis renewed at the
+        same rank) writes each into the array the one before it freed, z's first: no new cubes, no copies."""
+        if not getattr(mapping, "keeps_shape", False):
+            x, x_prev, y = (mapping(a) for a in (self.x, self.x_prev, self.y))
+            return self._place([x, x_prev, y, x])
+        free = self.z
+        for name in ("x", "x_prev", "y"):
+            old = getattr(self, name)
+            setattr(self, name, mapping(old, out=free))
+            free = old
+        self.z = free
 
     def _stats(self) -> tuple[float, float, float]:
         if self._fused_stats is not None:
