@@ -109,14 +109,13 @@ class Spaces:
         eigenvector, mapped, with a faint flat part and a looser tolerance (REFRESH_FLAT, REFRESH_TOL: the old
         dominant direction stays near the new one), its first estimate compared with the old L; a wider basis,
         whose dominant direction may lie in its new columns, starts as a first subspace does."""
-        be, subspace = self.backend, problem.subspace
-        mix = basis.T @ subspace.basis
+        subspace = problem.subspace
+        mapping = BandMixing(self.backend, basis.T @ subspace.basis)
         vector = getattr(subspace.model, "power_vector", None)      # none when its L was known (no power iteration)
-        start = None if vector is None else self._unit(be.bandmix(vector, mix))
+        start = None if vector is None else self._unit(mapping(vector))
         refresh = start is not None and basis.shape[1] <= subspace.rank
         power = {"start": start, "flat": REFRESH_FLAT, "tol": REFRESH_TOL, "expected": subspace.lipschitz}
-        moved = self.subspace(basis, power if refresh else None)
-        return moved, BandMixing(be, mix)
+        return self.subspace(basis, power if refresh else None), mapping
 
     def to_band(self, problem: Problem):
         """The mapping of ``problem``'s iterates to band space, v = B·c (a new array)."""
