@@ -84,7 +84,7 @@ class ForwardModel:
         λ_j = ⟨v, AᵀAv⟩ / ⟨v, v⟩,  v ← AᵀAv / ‖AᵀAv‖, until λ moves less than ``tol`` (relative);
         the Rayleigh quotient is a lower bound, hence the small safety margin (the solver's
         step back-off catches the rest). The last v is kept in ``power_vector`` (to start a
-        related model's iteration from it).
+        related model's iteration from it), the number of A·Aᵀ passes in ``power_passes``.
         """
         be = self.backend
         v = be.to_device(np.full(self.cube_shape, flat / np.sqrt(np.prod(self.cube_shape)), dtype=be.dtype))
@@ -93,8 +93,10 @@ class ForwardModel:
         w = be.empty(self.cube_shape)
         b = be.empty(self.sensor_shape)
         eigenvalue = expected / margin if expected else 0.0
+        self.power_passes = 0
         for _ in range(iters):
             self.adjoint(self.forward(v, out=b), out=w)
+            self.power_passes += 1
             previous, eigenvalue = eigenvalue, be.vdot(v, w) / be.vdot(v, v)
             norm = np.sqrt(be.vdot(w, w))
             if norm == 0.0 or abs(eigenvalue - previous) <= tol * eigenvalue:

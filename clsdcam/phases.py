@@ -4,7 +4,7 @@ weights, :mod:`clsdcam.auto_weights`) act between iterations. This module observ
 policy's: it reads the spectra (every ``SETTLE_EVERY`` iterations during the warm-up, one full step every
 ``CHECK_EVERY`` in a subspace) and moves the algorithm's iterates between spaces (``driver.move``), the moves shielded
 from Ctrl-C (:func:`clsdcam.interrupts.held_interrupt`). Every phase, check and widening is counted in the history
-(``rank``, ``transforms``) and the skip report.
+(``rank``, ``transforms``) and the skip report, whose FFT work done counts each new subspace's power iteration too.
 """
 from __future__ import annotations
 
@@ -115,7 +115,7 @@ class Phases:
         """The iterates onto the basis (c = Bᵀx), said in the skip report; the first checkpoint in the subspace sets
         the best iterate (see :meth:`_move`)."""
         self.core = action.core
-        sub = self.spaces.subspace(action.basis)
+        sub = self._counted(self.spaces.subspace(action.basis))
         self.driver.move(sub.subspace.project, self._step(sub.subspace.lipschitz), sub.objective, evaluate=False)
         self.problem = sub
         self.tracker.report.lines.append(subspace_line(action.basis.shape[1], self.spaces.n_bands,
@@ -146,6 +146,7 @@ class Phases:
         ``tests/test_skips.py::test_a_late_entry_keeps_improving``). The first checkpoint in the new space sets the
         best."""
         moved, mapping = self.spaces.onto(problem, action.basis)
+        self._counted(moved)
         self.driver.move(mapping, self._step(moved.subspace.lipschitz), moved.objective, evaluate=False)
         if action.basis.shape[1] == problem.rank:
             self._refreshes += 1
@@ -157,6 +158,12 @@ class Phases:
         self.driver.move(self.spaces.to_band(problem), self._step(self.spaces.lipschitz), band.objective)
         self.problem = band
         self._note(f"subspace left for band space at iteration {self.driver.iterations + 1}", gain)
+
+    def _counted(self, problem: Problem) -> Problem:
+        """A new subspace's problem, with the 2-D FFTs of its power iteration for L counted as work done (work the
+        full solver, one space with one L, does not do)."""
+        self.tracker.count(problem.subspace.power_transforms)
+        return problem
 
     def _step(self, lipschitz: float) -> float:
         """The step for a space of Lipschitz constant L: the driver's current step·L (step_scale, halved by any

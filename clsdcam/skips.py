@@ -36,7 +36,7 @@ class SkipReport:
 
     lines: list[str] = field(default_factory=list)
     full_work: float = 0.0      # FFT voxels the full solver would have transformed
-    done_work: float = 0.0      # FFT voxels transformed
+    done_work: float = 0.0      # FFT voxels transformed (the subspaces' checks and power iterations included)
 
     @property
     def saved(self) -> float:

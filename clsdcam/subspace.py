@@ -109,7 +109,8 @@ class SpectralSubspace:
                  lipschitz: float | None = None, scratch=None):
         """``power``: how the power iteration for L starts (``ForwardModel.lipschitz``'s ``start``, ``flat``, ``tol``,
         ``expected``);
-        ``lipschitz``: L when already known for this basis (no power iteration); ``scratch(name)``: a band cube
+        ``lipschitz``: L when already known for this basis (no power iteration; ``power_transforms``, the 2-D FFTs
+        the power iteration took, is then 0); ``scratch(name)``: a band cube
         shared by every subspace of a solve (each expansion is read at once; a new 64-band cube faults in every page
         at its first touch), else one allocated here."""
         be = self.backend = model.backend
@@ -118,6 +119,7 @@ class SpectralSubspace:
         self.full_model = model
         self.model = model.with_filters(subspace_filters(self.basis, filters).astype(be.dtype))
         self.lipschitz = lipschitz or self.model.lipschitz(**(power or {}))
+        self.power_transforms = 0 if lipschitz else self.model.power_passes * self.model.transforms()
         self.cube_shape = self.model.cube_shape
         scratch = scratch or (lambda name: be.empty(model.cube_shape))
         self._expanded = scratch("expanded")

@@ -11,6 +11,9 @@ from clsdcam.space_policy import CHECK_EVERY, WARMUP
 from clsdcam.sim import band_wavelengths, simulate
 from clsdcam.sim.kinds import make_kind
 from clsdcam.sim.scenes import FAINT_LINE
+from clsdcam.spaces import Spaces
+from clsdcam.subspace import SpectralSubspace
+from clsdcam.tracker import Tracker
 
 
 @pytest.fixture(scope="module")
@@ -134,6 +137,21 @@ def test_fft_work_counts_every_transform(leds):
     done = sum(r["transforms"] for r in result.history) * field
     full = sum(384 if np.isfinite(r["objective"]) else 256 for r in result.history) * 96 * 128
     assert result.attrs["fft_work_saved"] <= 1 - done / full + 1e-12   # the width checks add work too
+
+
+def test_fft_work_done_counts_each_subspaces_power_iteration(leds, monkeypatch):
+    """The work done is the iterations' transforms, the basis checks' and every new subspace's power passes: a forced
+    rank refreshes its basis at each check, and each refresh's L costs at least one A·Aᵀ pass."""
+    counted, checks, powers = [], [], []
+    count, check, built = Tracker.count, Spaces.full_step_transforms, SpectralSubspace.__init__
+    monkeypatch.setattr(Tracker, "count", lambda self, t, f=0: counted.append(t) or count(self, t, f))
+    monkeypatch.setattr(Spaces, "full_step_transforms", lambda *a, **k: checks.append(check(*a, **k)) or checks[-1])
+    monkeypatch.setattr(SpectralSubspace, "__init__",
+                        lambda self, *a, **k: built(self, *a, **k) or powers.append(self.power_transforms))
+    result = solve(leds, iters=WARMUP + 3 * CHECK_EVERY, rank=2)
+    assert len(checks) >= 2 and len(powers) == 1 + len(checks)     # the entry, then a refresh at each check
+    assert all(p >= 4 * 2 for p in powers)                           # ≥ 1 pass each: 4r transforms
+    assert sum(counted) == sum(r["transforms"] for r in result.history) + sum(checks) + sum(powers)
 
 
 def test_spectra_that_need_more_than_half_the_bands_stay_in_band_space():
