@@ -81,10 +81,14 @@ class ForwardModel:
         REFRESH_FLAT). ``expected``: the L that start came with (the old basis's), the estimate the first pass is
         compared with: a refresh whose L has not moved stops after one pass.
 
-        λ_j = ⟨v, AᵀAv⟩ / ⟨v, v⟩,  v ← AᵀAv / ‖AᵀAv‖, until λ moves less than ``tol`` (relative);
-        the Rayleigh quotient is a lower bound, hence the small safety margin (the solver's
-        step back-off catches the rest). The last v is kept in ``power_vector`` (to start a
-        related model's iteration from it), the number of A·Aᵀ passes in ``power_passes``.
+        λ_j = ⟨v, AᵀAv⟩ / ⟨v, v⟩,  v ← AᵀAv / ‖AᵀAv‖, until λ moves less than ``tol`` (relative). From a
+        ``start``, also as soon as the next pass is predicted to move it less: with v = a·u₁ + b·u₂ (eigenvalues λ₁
+        and λ₁ − g), ‖AᵀAv‖/‖v‖ − λ_j ≈ g²b²/(2λ) and λ_{j+1} − λ_j ≈ 2g²b²/λ, four times as much, so the
+        iteration stops when 4(‖AᵀAv‖/‖v‖ − λ_j) ≤ tol·λ_j, one pass before the change is seen (a refresh whose
+        start is already the new dominant vector stops after one pass, however far its L moved). The Rayleigh
+        quotient is a lower bound, hence the small safety margin (the solver's step back-off catches the rest).
+        The last v, one pass further than the λ read from it, is kept in ``power_vector`` (to start a related
+        model's iteration from it), the number of A·Aᵀ passes in ``power_passes``.
         """
         be = self.backend
         v = be.to_device(np.full(self.cube_shape, flat / np.sqrt(np.prod(self.cube_shape)), dtype=be.dtype))
@@ -97,10 +101,14 @@ class ForwardModel:
         for _ in range(iters):
             self.adjoint(self.forward(v, out=b), out=w)
             self.power_passes += 1
-            previous, eigenvalue = eigenvalue, be.vdot(v, w) / be.vdot(v, v)
+            length_sq = be.vdot(v, v)
+            previous, eigenvalue = eigenvalue, be.vdot(v, w) / length_sq
             norm = np.sqrt(be.vdot(w, w))
-            if norm == 0.0 or abs(eigenvalue - previous) <= tol * eigenvalue:
+            if norm == 0.0:
                 break
             be.scale(1.0 / norm, w, out=v)
+            settled = start is not None and 4.0 * (norm / np.sqrt(length_sq) - eigenvalue) <= tol * eigenvalue
+            if settled or abs(eigenvalue - previous) <= tol * eigenvalue:
+                break
         self.power_vector = v
         return margin * eigenvalue

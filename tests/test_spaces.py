@@ -120,6 +120,23 @@ def test_a_refresh_whose_lipschitz_constant_has_not_moved_takes_one_pass(spaces,
     assert len(counted) == 1 and exact * (1 - model_module.REFRESH_TOL) <= moved.subspace.lipschitz <= exact
 
 
+def test_a_refresh_that_starts_at_its_dominant_vector_takes_one_pass_though_its_lipschitz_constant_moved(
+        spaces, monkeypatch):
+    """A refresh whose old L is 5 % off but whose start is already the new basis's dominant vector (a long run's):
+    the next pass's predicted change, 4(‖AᵀAv‖/‖v‖ − λ), stops it after one pass, within the refresh's tolerance of a
+    200-pass estimate. A start far from it (the flat cube alone) does not stop there."""
+    model = spaces.subspace(orthonormal(3, seed=14)).subspace.model
+    exact = model.lipschitz(iters=200, tol=0.0)
+    dominant = model.power_vector
+    counted = passes(model, monkeypatch)
+    found = model.lipschitz(start=dominant, flat=model_module.REFRESH_FLAT, tol=model_module.REFRESH_TOL,
+                            expected=0.95 * exact)
+    assert len(counted) == 1 and exact * (1 - model_module.REFRESH_TOL) <= found <= exact * (1 + 1e-9)
+    counted.clear()
+    model.lipschitz(flat=1.0, tol=model_module.REFRESH_TOL, expected=0.95 * exact)
+    assert len(counted) > 1
+
+
 def test_fista_moves_to_a_basis_of_the_same_rank_in_its_own_arrays(spaces):
     """Onto a basis of the same rank the mapping keeps the shape, and FISTA writes the mapped iterates into its own
     four arrays (no new cubes), with the values of mapping each into a new one; onto a wider basis it takes new ones."""
