@@ -23,6 +23,7 @@ POWER_ITERS = 30          # at most, for the Lipschitz constant
 POWER_TOL = 1e-4          # stop once the Rayleigh quotient moves less than this (relative)
 REFRESH_FLAT = 0.01       # a refreshed basis's start: the flat cube's weight beside the old eigenvector, mapped
 REFRESH_TOL = 1e-3        # and its tolerance, a tenth of the margin (clsdcam.spaces.Spaces.onto)
+PREDICTED_CHANGE = 4.0    # near the dominant vector, λ's next change over ‖AᵀAv‖/‖v‖ − λ, at most
 
 
 class ForwardModel:
@@ -82,13 +83,15 @@ class ForwardModel:
         compared with: a refresh whose L has not moved stops after one pass.
 
         λ_j = ⟨v, AᵀAv⟩ / ⟨v, v⟩,  v ← AᵀAv / ‖AᵀAv‖, until λ moves less than ``tol`` (relative). From a
-        ``start``, also as soon as the next pass is predicted to move it less: with v = a·u₁ + b·u₂ (eigenvalues λ₁
-        and λ₁ − g), ‖AᵀAv‖/‖v‖ − λ_j ≈ g²b²/(2λ) and λ_{j+1} − λ_j ≈ 2g²b²/λ, four times as much, so the
-        iteration stops when 4(‖AᵀAv‖/‖v‖ − λ_j) ≤ tol·λ_j, one pass before the change is seen (a refresh whose
-        start is already the new dominant vector stops after one pass, however far its L moved). The Rayleigh
+        ``start``, also as soon as the next pass is predicted to move it less: near the dominant vector, v = a·u₁ +
+        b·u₂ with b small (eigenvalues λ₁ and λ₂ = λ₁ − g), ‖AᵀAv‖/‖v‖ − λ_j ≈ g²b²/(2λ) and λ_{j+1} − λ_j is
+        2(1 + λ₂/λ₁) ≤ 4 times that (PREDICTED_CHANGE), so the iteration stops when 4(‖AᵀAv‖/‖v‖ − λ_j) ≤ tol·λ_j,
+        one pass before the change is seen (a refresh whose start is already the new dominant vector stops after one
+        pass, however far its L moved). From a start far from it the ratio can exceed 4, and the flat part is the
+        guard, as it is for the first rule. The Rayleigh
         quotient is a lower bound, hence the small safety margin (the solver's step back-off catches the rest).
         The last v, one pass further than the λ read from it, is kept in ``power_vector`` (to start a related
-        model's iteration from it), the number of A·Aᵀ passes in ``power_passes``.
+        model's iteration from it), the number of AᵀA passes in ``power_passes``.
         """
         be = self.backend
         v = be.to_device(np.full(self.cube_shape, flat / np.sqrt(np.prod(self.cube_shape)), dtype=be.dtype))
@@ -107,7 +110,8 @@ class ForwardModel:
             if norm == 0.0:
                 break
             be.scale(1.0 / norm, w, out=v)
-            settled = start is not None and 4.0 * (norm / np.sqrt(length_sq) - eigenvalue) <= tol * eigenvalue
+            predicted = PREDICTED_CHANGE * (norm / np.sqrt(length_sq) - eigenvalue)     # λ_{j+1} − λ_j, at most
+            settled = start is not None and predicted <= tol * eigenvalue
             if settled or abs(eigenvalue - previous) <= tol * eigenvalue:
                 break
         self.power_vector = v

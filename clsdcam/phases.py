@@ -115,7 +115,8 @@ class Phases:
         """The iterates onto the basis (c = Bᵀx), said in the skip report; the first checkpoint in the subspace sets
         the best iterate (see :meth:`_move`)."""
         self.core = action.core
-        sub = self._counted(self.spaces.subspace(action.basis))
+        sub = self.spaces.subspace(action.basis)
+        self._count_power(sub)
         self.driver.move(sub.subspace.project, self._step(sub.subspace.lipschitz), sub.objective, evaluate=False)
         self.problem = sub
         self.tracker.report.lines.append(subspace_line(action.basis.shape[1], self.spaces.n_bands,
@@ -146,7 +147,7 @@ class Phases:
         ``tests/test_skips.py::test_a_late_entry_keeps_improving``). The first checkpoint in the new space sets the
         best."""
         moved, mapping = self.spaces.onto(problem, action.basis)
-        self._counted(moved)
+        self._count_power(moved)
         self.driver.move(mapping, self._step(moved.subspace.lipschitz), moved.objective, evaluate=False)
         if action.basis.shape[1] == problem.rank:
             self._refreshes += 1
@@ -159,11 +160,10 @@ class Phases:
         self.problem = band
         self._note(f"subspace left for band space at iteration {self.driver.iterations + 1}", gain)
 
-    def _counted(self, problem: Problem) -> Problem:
-        """A new subspace's problem, with the 2-D FFTs of its power iteration for L counted as work done (work the
-        full solver, one space with one L, does not do)."""
+    def _count_power(self, problem: Problem):
+        """The 2-D FFTs of a new subspace's power iteration for L, counted as work done (work the full solver, one
+        space with one L, does not do)."""
         self.tracker.count(problem.subspace.power_transforms)
-        return problem
 
     def _step(self, lipschitz: float) -> float:
         """The step for a space of Lipschitz constant L: the driver's current step·L (step_scale, halved by any

@@ -118,8 +118,11 @@ class SpectralSubspace:
         self.rank = self.basis.shape[1]
         self.full_model = model
         self.model = model.with_filters(subspace_filters(self.basis, filters).astype(be.dtype))
-        self.lipschitz = lipschitz or self.model.lipschitz(**(power or {}))
-        self.power_transforms = 0 if lipschitz else self.model.power_passes * self.model.transforms()
+        if lipschitz:
+            self.lipschitz, self.power_transforms = lipschitz, 0
+        else:
+            self.lipschitz = self.model.lipschitz(**(power or {}))
+            self.power_transforms = self.model.power_passes * self.model.transforms()
         self.cube_shape = self.model.cube_shape
         scratch = scratch or (lambda name: be.empty(model.cube_shape))
         self._expanded = scratch("expanded")
