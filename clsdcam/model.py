@@ -88,10 +88,10 @@ class ForwardModel:
         2(1 + λ₂/λ₁) ≤ 4 times that (PREDICTED_CHANGE), so the iteration stops when 4(‖AᵀAv‖/‖v‖ − λ_j) ≤ tol·λ_j,
         one pass before the change is seen (a refresh whose start is already the new dominant vector stops after one
         pass, however far its L moved). From a start far from it the ratio can exceed 4, and the flat part is the
-        guard, as it is for the first rule. The Rayleigh
-        quotient is a lower bound, hence the small safety margin (the solver's step back-off catches the rest).
-        The last v, one pass further than the λ read from it, is kept in ``power_vector`` (to start a related
-        model's iteration from it), the number of AᵀA passes in ``power_passes``.
+        guard, as it is for the first rule. The Rayleigh quotient is a lower bound, hence the small safety margin
+        (the solver's step back-off catches the rest). The last v, one pass further than the λ read from it, is kept
+        in ``power_vector`` (to start a related model's iteration from it), the number of AᵀA passes in
+        ``power_passes``.
         """
         be = self.backend
         v = be.to_device(np.full(self.cube_shape, flat / np.sqrt(np.prod(self.cube_shape)), dtype=be.dtype))

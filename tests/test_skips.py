@@ -141,7 +141,7 @@ def test_fft_work_counts_every_transform(leds):
 
 def test_fft_work_done_counts_each_subspaces_power_iteration(leds, monkeypatch):
     """The work done is the iterations' transforms, the basis checks' and every new subspace's power passes: a forced
-    rank refreshes its basis at each check, and each refresh's L costs at least one A·Aᵀ pass."""
+    rank refreshes its basis at each check, and each refresh's L costs at least one AᵀA pass."""
     counted, checks, powers = [], [], []
     count, check, built = Tracker.count, Spaces.full_step_transforms, SpectralSubspace.__init__
     monkeypatch.setattr(Tracker, "count", lambda self, t, f=0: counted.append(t) or count(self, t, f))
