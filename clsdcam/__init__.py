@@ -11,11 +11,11 @@ __version__ = "0.2.0"
 _LAZY = {
     "Calibration": "clsdcam.calibration",
     "Preprocessing": "clsdcam.calibration",
-    "prepare": "clsdcam.calibration",
+    "prepare": "clsdcam.calibrate.measurement",
     "reconstruct": "clsdcam.solver",
     "Solver": "clsdcam.solver",
     "Settings": "clsdcam.settings",
-    "Result": "clsdcam.solver",
+    "Result": "clsdcam.result",
     "InputError": "clsdcam.errors",
     "load_measurement": "clsdcam.io",
 }

@@ -22,7 +22,7 @@ import numpy as np
 
 from . import sim
 from .calibration import Calibration
-from .calibrate.raw import bin_pixels, shift_image
+from .raw import bin_pixels, shift_image
 from .metrics import psnr, spectral_angle
 from .sim.scenes import SOURCE_FWHM, source_cube, source_lines, source_positions
 from .solver import reconstruct

@@ -5,14 +5,14 @@ Layouts read:
   in MATLAB v5 (scipy.io) or v7.3 (HDF5; MATLAB stores arrays transposed, undone here);
 - our HDF5: ``psf`` (H,W), ``filters`` (K,H,W), ``wavelengths`` (K,); optionally ``dead_pixels`` (H,W) bool
   (pixels left out of every reconstruction, from ``clsdcam calibrate filters``) and a group ``raw``: the steps that
-  turned raw frames into the calibration's size (:mod:`clsdcam.calibrate.raw`), which :func:`prepare` applies to a
+  turned raw frames into the calibration's size (:mod:`clsdcam.raw`), which ``prepare`` applies to a
   measurement of the recorded raw size.
 Inside, filters are (K,H,W) (docs/conventions.md); the file's (H,W,K) is converted at load time.
 
 Preprocessing (each step an option, the reference set in :meth:`Preprocessing.reference`):
 crop a window of calibration and measurement, drop the last band, zero the 4×4 defective
 block around the brightest pixel of Σ_k F_k (in filters and measurement), PSF → PSF/‖PSF‖₂,
-filters → F/max F. Before them, :func:`prepare` gives the measurement its raw steps: the calibration's recorded
+filters → F/max F. Before them, :func:`clsdcam.calibrate.measurement.prepare` gives the measurement its raw steps: the calibration's recorded
 ones for a raw-size frame, else its own dark and binning (``Preprocessing.dark``, ``.bin``;
 :mod:`clsdcam.calibrate.measurement`).
 """
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibrate.raw import RawSteps, apply_raw_steps, read_record, write_record
+from .raw import RawSteps, read_record, write_record
 from .errors import InputError, shape_text
 from .io import MAX_DATASET_BYTES, as_real_array, atomic_output, existing_file, first_line, read_dataset, require_finite
 
@@ -38,7 +38,7 @@ class Calibration:
     ``scale``: the factor the model A was divided by when the PSF and filters were normalised
     (:func:`preprocess`); a cube solved on this calibration, divided by it, is in the units of the
     calibration as it was measured (normalising conditions the solve, it does not change the units).
-    ``raw``: the raw steps of the PSF frames (:class:`clsdcam.calibrate.raw.RawSteps`), None if unknown;
+    ``raw``: the raw steps of the PSF frames (:class:`clsdcam.raw.RawSteps`), None if unknown;
     ``dead_pixels``: (H,W) bool, pixels whose filter function is not to be trusted (None: none).
     """
 
@@ -255,42 +255,6 @@ def preprocess(calibration: Calibration, measurement: np.ndarray, options: Prepr
         filters = filters / np.max(filters)
     out = replace(calibration, psf=psf, filters=filters, wavelengths=wavelengths, scale=float(scale), dead_pixels=None)
     return out, b
-
-
-def prepare(measurement, calibration, options: "Preprocessing | None" = None, report=None):
-    """(calibration, measurement) ready to solve, the same way for the API and the command line. ``measurement``:
-    a file path, a list of file paths (their mean) or an array; ``calibration``: a :class:`Calibration` or a file
-    path. Then the measurement's raw steps (:func:`raw_steps`) and :func:`preprocess` with ``options`` (default:
-    :class:`Preprocessing` ()). The calibration's ``scale`` brings solved cubes back to its units.
-
-    What was done to the measurement (frames averaged, raw steps) is appended to the returned calibration's
-    ``source`` ("…; raw steps applied to the measurement: …"), and with it to the ``calibration`` attribute of a
-    cube solved on it; ``report`` (if given) is called with each of those lines."""
-    from .calibrate.measurement import mean_frame
-
-    options = options or Preprocessing()
-    if not isinstance(calibration, Calibration):
-        calibration = Calibration.load(calibration)
-    measurement, averaged = mean_frame(measurement)
-    measurement, steps = raw_steps(calibration, measurement, options)
-    notes = averaged + steps
-    for line in notes if report else ():
-        report(line)
-    source = "; ".join([calibration.source, *notes])
-    return preprocess(replace(calibration, source=source), measurement, options)
-
-
-def raw_steps(calibration: Calibration, measurement, options: Preprocessing) -> tuple[np.ndarray, list[str]]:
-    """(measurement, notes) after the measurement's raw steps (:mod:`clsdcam.calibrate.measurement`): the
-    calibration's recorded ones (``calibration.raw``) when the measurement has the recorded raw size, with
-    ``options.dark`` in place of the recorded dark when given; else ``options.dark`` and ``options.bin``."""
-    from .calibrate.measurement import measurement_steps
-
-    measurement = np.asarray(measurement, np.float64)
-    steps, label = measurement_steps(calibration.raw, measurement, options.dark, options.bin)
-    if steps is None:
-        return measurement, []
-    return apply_raw_steps(steps, measurement), [f"{label}: {steps.describe()}"]
 
 
 def _crop_window(crop, calibration: Calibration, b: np.ndarray) -> tuple[slice, slice]:

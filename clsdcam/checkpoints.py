@@ -74,7 +74,7 @@ class Checkpoints:
             return {"objective": value}
         if self.rolled_back or not math.isfinite(value):
             return {**self.back_off(), "objective": self.best_objective}
-        if not getattr(self.algorithm, "monotone", True):      # its F may rise on the way (ADMM): kept, not undone
+        if not self.algorithm.monotone:      # its F may rise on the way (ADMM): kept, not undone
             return {"objective": value}
         self.rolled_back = True
         self.algorithm.reset(self.best)

@@ -25,8 +25,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .backends.cases import CASES, Inputs, benchmarks
-from .backends.numpy import NumpyBackend
+from .backends import CASES, Inputs, NumpyBackend, benchmarks
 
 DEFAULT_PROBLEM = ((320, 448), (640, 896), 64)      # sensor, the paper's field, bands
 SIZES = {"small": (3, (11, 15), (22, 30)), "medium": (16, (61, 83), (128, 180))}    # bands, sensor, field
@@ -45,7 +44,7 @@ class Row:
 # ---- the device and its memory ---------------------------------------------------------------
 def device_rows(be) -> list[Row]:
     """The device and the limits clsdcam depends on."""
-    from .backends.cl_devices import has_fp64, is_cpu, memory_limits
+    from .backends import has_fp64, is_cpu, memory_limits
 
     d, (memory, largest) = be.device, memory_limits(be.device)
     facts = {"device": be.device_name, "driver": f"{d.driver_version} ({d.version.strip()})",
@@ -59,7 +58,7 @@ def device_rows(be) -> list[Row]:
 def memory_rows(be) -> list[Row]:
     """The default problem's plan: band space (checked, as the solver does: ``check_problem``), how many bands of
     that field fit, a K/2 subspace, one field cube."""
-    from .backends.cl_devices import MOST_BANDS, bands_that_fit, problem_bytes, shortfall
+    from .backends import MOST_BANDS, bands_that_fit, problem_bytes, shortfall
 
     sensor, field, bands = DEFAULT_PROBLEM
     (total, largest), mib = problem_bytes(sensor, field, bands, be.dtype), 1 << 20
@@ -127,9 +126,7 @@ def median_ms(run, finish, repeat: int = REPEAT) -> float:
 
 def fft_rows(device) -> list[Row]:
     """fft2 + ifft2 of the timed cube with each engine of each path the device runs."""
-    from .backends.cl_devices import is_cpu
-    from .backends.fft import available_engines
-    from .backends.opencl import OpenCLBackend
+    from .backends import OpenCLBackend, available_engines, is_cpu
 
     rows = []
     for path in (["host"] if is_cpu(device) else []) + ["device"]:
@@ -155,8 +152,7 @@ def bandwidth_rows(be) -> list[Row]:
 # ---- the whole check -------------------------------------------------------------------------
 def check(device: str | None = None, progress=lambda section: None) -> list[Row]:
     """Every section on the device ``device`` names (clsdcam's choice when None)."""
-    from .backends.cl_devices import choose_device, is_cpu
-    from .backends.opencl import OpenCLBackend
+    from .backends import OpenCLBackend, choose_device, is_cpu
 
     chosen = choose_device(device)
     backends = {path: OpenCLBackend("float32", device=chosen, path=path)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .render import _figure, _save
+from .render import new_figure, save_figure
 
 FILTER_CROP = 32    # px: the filter-layout panel shows this square at the sensor's centre (2×2 tiles of the prototype)
 
@@ -41,7 +41,7 @@ def save_input_picture(prefix, inputs: Inputs) -> list[Path]:
     if not inputs:
         return []
     prefix = Path(prefix)
-    return [_save(input_figure(inputs), prefix.with_name(f"{prefix.name}_input.png"))]
+    return [save_figure(input_figure(inputs), prefix.with_name(f"{prefix.name}_input.png"))]
 
 
 def input_figure(inputs: Inputs):
@@ -52,7 +52,7 @@ def input_figure(inputs: Inputs):
     spectral = inputs.filters is not None and len(inputs.filters) > 1
     panels = [draw for draw, known in ((_frame_panel, inputs.frame is not None), (_psf_panel, inputs.psf is not None),
                                        (_filter_panel, spectral)) if known]
-    fig = _figure(figsize=(5 * len(panels), 4.6))
+    fig = new_figure(figsize=(5 * len(panels), 4.6))
     for ax, draw in zip(fig.subplots(1, len(panels), squeeze=False)[0], panels):
         draw(fig, ax, inputs)
         ax.set(xlabel="x (px)", ylabel="y (px)")

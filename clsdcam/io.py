@@ -141,9 +141,9 @@ def load_measurement(path) -> np.ndarray:
     path = existing_file(path, "measurement")
     suffix = path.suffix.lower()
     if suffix in IMAGE_SUFFIXES:
-        data = _read_image(path)
+        data = read_image(path)
     elif suffix == ".npy":
-        data = _read_npy(path)
+        data = read_npy(path)
     elif suffix in (".h5", ".hdf5"):
         data = read_h5_dataset(path, "measurement", "measurement")
     else:
@@ -154,7 +154,7 @@ def load_measurement(path) -> np.ndarray:
     return require_finite(frame, f"measurement {path}")
 
 
-def _read_image(path: Path) -> np.ndarray:
+def read_image(path: Path) -> np.ndarray:
     """8/16-bit grey PNG or TIFF as an integer array (PIL for PNG, tifffile for TIFF). A file that holds no image
     data (tifffile reads a truncated TIFF as an empty array, and logs why) is an InputError, without the log."""
     try:
@@ -187,7 +187,7 @@ def _read_tiff(path: Path) -> np.ndarray:
         log.disabled = disabled
 
 
-def _read_npy(path: Path) -> np.ndarray:
+def read_npy(path: Path) -> np.ndarray:
     """Memory-map first, so a header that declares more data than the file holds fails cheaply."""
     try:
         return np.array(np.load(path, mmap_mode="r", allow_pickle=False))

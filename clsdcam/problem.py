@@ -9,17 +9,17 @@ each space knows how to turn its iterate back into a band cube (:meth:`Problem.t
 """
 from __future__ import annotations
 
-from typing import Callable
-
-from .errors import InputError
+from typing import Callable, Sequence
 
 
 class Problem:
     """The data term through ``model`` and the prior through ``prox`` / ``penalty``, for one normalised b;
-    ``subspace`` (a :class:`~clsdcam.subspace.SpectralSubspace`) when x holds its coefficients."""
+    ``subspace`` (a :class:`~clsdcam.subspace.SpectralSubspace`) when x holds its coefficients. What an algorithm
+    with sub-problems of its own builds them from (:mod:`clsdcam.algorithms.base`): ``priors`` (the priors g is made
+    of), ``filters`` (the calibration's, (K, H, W)) and ``shared`` (the solver's store across its solves)."""
 
-    def __init__(self, model, b, prox: Callable, penalty: Callable, rank: int, subspace=None,
-                 splitting: Callable | None = None):
+    def __init__(self, model, b, prox: Callable, penalty: Callable, rank: int, subspace=None, *,
+                 priors: Sequence = (), filters=None, shared: dict | None = None):
         self.model = model
         self.backend = model.backend
         self.b = b
@@ -27,8 +27,10 @@ class Problem:
         self.penalty = penalty
         self.rank = rank
         self.subspace = subspace
+        self.priors = list(priors)
+        self.filters = filters
+        self.shared = {} if shared is None else shared
         self.residual_buffer = self.backend.empty(model.sensor_shape)
-        self._splitting = splitting      # () -> clsdcam.splitting.SplittingBase: ADMM's closed-form steps (band space)
 
     def gradient_step(self, y, out, step: float) -> float:
         """out = y − step·A_sᵀ(A_s y − b) (fused in the adjoint); returns f(y) = ½‖A_s y − b‖²."""
@@ -61,13 +63,6 @@ class Problem:
             return x
         cube = self.subspace.expand(x)
         return self.backend.nonneg(cube, out=cube)
-
-    def splitting(self):
-        """ADMM's closed-form steps for this problem (:class:`clsdcam.splitting.SplittingBase`); InputError where the
-        space has none."""
-        if self._splitting is None:
-            raise InputError("--algorithm admm runs in band space: no --subspace or --rank")
-        return self._splitting()
 
     def transforms(self) -> int:
         """2-D FFTs per gradient step."""

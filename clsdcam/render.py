@@ -136,7 +136,7 @@ def false_colour(cube, wavelengths) -> np.ndarray:
 
 
 # ---- figures ---------------------------------------------------------------------------
-def _figure(**kwargs):
+def new_figure(**kwargs):
     """A matplotlib Figure on its own Agg canvas (no pyplot state, nothing to close)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -146,7 +146,7 @@ def _figure(**kwargs):
     return fig
 
 
-def _save(fig, path: Path) -> Path:
+def save_figure(fig, path: Path) -> Path:
     """Write ``fig`` as PNG to ``path`` atomically and release its artists."""
     with atomic_output(path) as tmp:
         fig.savefig(tmp, format="png", dpi=100)
@@ -160,7 +160,7 @@ def projections_figure(cube, wavelengths, image):
     Expects increasing wavelengths."""
     k, h, w = cube.shape
     edges = band_edges(wavelengths)
-    fig = _figure(figsize=(15, 4.8))
+    fig = new_figure(figsize=(15, 4.8))
     ax_img, ax_x, ax_y = fig.subplots(1, 3)
     ax_img.imshow(image, interpolation="nearest")
     ax_img.set(title="false colour (CIE 1931 → sRGB)", xlabel="x (px)", ylabel="y (px)")
@@ -180,7 +180,7 @@ def spectra_figure(cube, wavelengths, image, points, truth=None):
     from matplotlib.patheffects import withStroke
 
     outline = [withStroke(linewidth=3, foreground="black")]
-    fig = _figure(figsize=(12, 4.8))
+    fig = new_figure(figsize=(12, 4.8))
     ax_img, ax_spec = fig.subplots(1, 2, width_ratios=(1, 1.6))
     ax_img.imshow(image, interpolation="nearest")
     ax_img.set(title="points", xlabel="x (px)", ylabel="y (px)")
@@ -213,7 +213,7 @@ def profiles_figure(image, grey, point, truth=None):
     """A one-band cube (a plain DiffuserCam): the grey ``image`` (H, W) with the row and column through
     ``point`` = (y, x) marked, and the intensity along both (the truth's dashed)."""
     y, x = point
-    fig = _figure(figsize=(12, 4.8))
+    fig = new_figure(figsize=(12, 4.8))
     ax_img, ax_prof = fig.subplots(1, 2, width_ratios=(1, 1.6))
     ax_img.imshow(grey, cmap="gray", interpolation="nearest")
     ax_img.axhline(y, color="tab:red", lw=1)
@@ -248,7 +248,7 @@ def convergence_figure(history):
                   for key in ("objective", "data")}
     except (TypeError, KeyError, ValueError, AttributeError):
         raise InputError("history: expected a list of dicts with numeric 'iteration', 'data' and 'objective'") from None
-    fig = _figure(figsize=(7.5, 4.5))
+    fig = new_figure(figsize=(7.5, 4.5))
     ax = fig.subplots()
     curves = (("objective", iterations, "o", "objective F(x) = ½‖A·x − b‖² + priors, at checkpoints"),
               ("data", iterations - 1, "-", "data term ½‖A·y − b‖² at the point the next step starts from"))
@@ -301,14 +301,14 @@ def save_pictures(prefix, cube, wavelengths, history=None, points=None, truth=No
     paths = [prefix.with_name(f"{prefix.name}_{name}.png") for name in (first, *figures)]
     with atomic_output(paths[0]) as tmp:
         matplotlib.image.imsave(tmp, image, format="png")
-    return [paths[0], *(_save(fig, path) for fig, path in zip(figures.values(), paths[1:]))]
+    return [paths[0], *(save_figure(fig, path) for fig, path in zip(figures.values(), paths[1:]))]
 
 
 # ---- analysis pictures (clsdcam analyze) ---------------------------------------------------
 def save_curves(path, title: str, xlabel: str, ylabel: str, curves: dict, log_y: bool = False,
                 hline: float | None = None) -> Path:
     """Line plot of ``curves`` {label: (x, y)}; optional horizontal reference line."""
-    fig = _figure(figsize=(6, 4))
+    fig = new_figure(figsize=(6, 4))
     ax = fig.subplots()
     for label, (x, y) in curves.items():
         ax.plot(x, y, marker=".", label=label)
@@ -317,7 +317,7 @@ def save_curves(path, title: str, xlabel: str, ylabel: str, curves: dict, log_y:
     ax.set(title=title, xlabel=xlabel, ylabel=ylabel, yscale="log" if log_y else "linear")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
-    return _save(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def save_autocorrelation(path, corr: np.ndarray, halfwidth_px: float) -> Path:
@@ -325,18 +325,18 @@ def save_autocorrelation(path, corr: np.ndarray, halfwidth_px: float) -> Path:
     reach = int(max(4, 4 * halfwidth_px))
     cy, cx = corr.shape[0] // 2, corr.shape[1] // 2
     crop = corr[cy - reach:cy + reach + 1, cx - reach:cx + reach + 1]
-    fig = _figure(figsize=(4.5, 4))
+    fig = new_figure(figsize=(4.5, 4))
     ax = fig.subplots()
     extent = (-reach - 0.5, reach + 0.5, reach + 0.5, -reach - 0.5)
     ax.imshow(crop, extent=extent, cmap="magma")
     ax.contour(np.arange(-reach, reach + 1), np.arange(-reach, reach + 1), crop, levels=[0.7], colors="cyan")
     ax.set(title=f"PSF autocorrelation; 70 % half-width {halfwidth_px:.2f} px", xlabel="Δx (px)", ylabel="Δy (px)")
-    return _save(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def save_design_pictures(path, designs: dict) -> Path:
     """Per design: false colour and the y–λ sum projection, side by side."""
-    fig = _figure(figsize=(4.2 * len(designs), 6.5))
+    fig = new_figure(figsize=(4.2 * len(designs), 6.5))
     axes = fig.subplots(2, len(designs), squeeze=False)
     for column, (name, row) in enumerate(designs.items()):
         cube, wavelengths = row["cube"], row["wavelengths"]
@@ -346,7 +346,7 @@ def save_design_pictures(path, designs: dict) -> Path:
         axes[1, column].pcolormesh(edges, np.arange(cube.shape[1] + 1) - 0.5, cube.sum(axis=2).T, shading="flat")
         axes[1, column].set(xlabel="wavelength (nm)", ylabel="y (px)")
         axes[1, column].invert_yaxis()
-    return _save(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def save_condition_curves(path, separations, study: dict, limit: float, superpixel_px: int) -> Path:
@@ -356,7 +356,7 @@ def save_condition_curves(path, separations, study: dict, limit: float, superpix
     modes = sorted({row["mode"] for row in study.values()})
     designs = list(dict.fromkeys(row["design"] for row in study.values()))
     sizes = sorted({row["points"] for row in study.values()})
-    fig = _figure(figsize=(6 * len(modes), 4.5))
+    fig = new_figure(figsize=(6 * len(modes), 4.5))
     for ax, mode in zip(fig.subplots(1, len(modes), squeeze=False)[0], modes):
         for row in (r for r in study.values() if r["mode"] == mode):
             weight = (sizes.index(row["points"]) + 1) / len(sizes)
@@ -370,4 +370,4 @@ def save_condition_curves(path, separations, study: dict, limit: float, superpix
         top.set_xlabel("separation (super-pixels)")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=6, ncols=len(designs))
-    return _save(fig, Path(path))
+    return save_figure(fig, Path(path))

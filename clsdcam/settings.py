@@ -64,9 +64,9 @@ class SolverSettings:
     def _check_algorithm_limits(self, algorithm):
         """What the algorithm declares it cannot do yet (:mod:`clsdcam.algorithms.base`): a subspace, other priors."""
         name = self.algorithm
-        _require(not getattr(algorithm, "band_space_only", False) or not (self.subspace or self.rank),
+        _require(not algorithm.band_space_only or not (self.subspace or self.rank),
                  f"--algorithm {name} runs in band space: drop --subspace and --rank (or use --algorithm fista)")
-        stepped = getattr(algorithm, "priors", None)
+        stepped = algorithm.priors
         if stepped is not None:
             others = [row.flag for row in PRIORS if row.name not in stepped and getattr(self, row.name) != 0]
             _require(not others, f"--algorithm {name} has steps for {' and '.join('--' + p for p in stepped)} only, "

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .backends.host_convolution import seen_bands
+from .backends import seen_bands
 from .errors import shape_text
 from .geometry import FieldGeometry, centred_geometry, support_geometry
 

@@ -5,14 +5,12 @@ from __future__ import annotations
 
 import hashlib
 from functools import cached_property
-from typing import Callable
 
 import numpy as np
 
 from .model import REFRESH_FLAT, REFRESH_TOL
 from .priors import ProxAverage
 from .problem import Problem
-from .splitting import CalibrationTerms, Splitting, SplittingBase
 from .subspace import SpectralSubspace
 
 
@@ -46,26 +44,12 @@ class LastLipschitz:
         self.key, self.value = self.digest(basis), value
 
 
-def band_splitting(model, b, terms: CalibrationTerms, priors: list) -> SplittingBase:
-    """ADMM's steps in band space for ``priors`` (TV and L1: what ``Settings`` lets ADMM take) on the model's backend:
-    :class:`~clsdcam.splitting.Splitting` on NumPy, :class:`~clsdcam.kernel_splitting.KernelSplitting` (kernels) on
-    OpenCL."""
-    by_name = {prior.name: prior for prior in priors}
-    tv, l1, backend = by_name.get("tv"), by_name.get("l1"), model.backend
-    if backend.name == "opencl":
-        from .kernel_splitting import KernelSplitting
-
-        return KernelSplitting(model, b, terms, tv, l1)
-    return Splitting(model, backend.to_host(b), terms, tv, l1, backend.workers)
-
-
 class Spaces:
     """Band space and the subspaces of one measurement b (normalised, on the device) under ``priors``."""
 
     def __init__(self, model, b, priors: list, filters: np.ndarray, lipschitz: float, last: LastLipschitz,
-                 terms: Callable[[], CalibrationTerms] | None = None):
-        """``terms``: the solver's :class:`~clsdcam.splitting.CalibrationTerms` of ``model``, built on first use
-        (none: built here for this solve)."""
+                 shared: dict | None = None):
+        """``shared``: the solver's store across its solves, handed to every problem (none: one for this solve)."""
         self.model = model
         self.backend = model.backend
         self.b = b
@@ -74,18 +58,18 @@ class Spaces:
         self.lipschitz = lipschitz           # band space's
         self.n_bands = model.n_bands
         self._last = last
-        self._terms = terms or (lambda: CalibrationTerms(model, filters))
+        self._shared = {} if shared is None else shared
         self._buffers: dict = {}
 
     @cached_property
     def band(self) -> Problem:
         """The problem on the band cube (the full problem)."""
         average = ProxAverage(self.backend, self.priors, self.model.cube_shape)
-        return Problem(self.model, self.b, average.prox, average.value, self.n_bands, splitting=self.splitting)
+        return Problem(self.model, self.b, average.prox, average.value, self.n_bands, **self._parts())
 
-    def splitting(self) -> SplittingBase:
-        """ADMM's closed-form steps for band space (TV and L1 priors only)."""
-        return band_splitting(self.model, self.b, self._terms(), self.priors)
+    def _parts(self) -> dict:
+        """What every problem of this solve hands an algorithm's sub-problems (:class:`~clsdcam.problem.Problem`)."""
+        return {"priors": self.priors, "filters": self.filters, "shared": self._shared}
 
     def subspace(self, basis: np.ndarray, power: dict | None = None) -> Problem:
         """The problem on ``basis``: its L by a power iteration started as ``power`` says
@@ -96,7 +80,7 @@ class Spaces:
             power = {"start": self._unit(self.backend.bandmix(self.model.power_vector, basis.T))}
         sub = SpectralSubspace(self.model, basis, self.priors, self.filters, power, known, scratch=self._cube)
         self._last.set(basis, sub.lipschitz)
-        return Problem(sub.model, self.b, sub.prox, sub.penalty, sub.rank, subspace=sub)
+        return Problem(sub.model, self.b, sub.prox, sub.penalty, sub.rank, subspace=sub, **self._parts())
 
     def _unit(self, c):
         """c/‖c‖ (None when c is zero)."""

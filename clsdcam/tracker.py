@@ -9,19 +9,16 @@ import numpy as np
 from .geometry import centred_geometry
 from .problem import Problem
 from .skips import SkipReport
-
-
-def in_data_units(record: dict, scale: float) -> dict:
-    """A copy of a driver's record (solver units, b / max|b|) with the data term and objective in data units (×s²)."""
-    return {**record, "data": record["data"] * scale ** 2, "objective": record["objective"] * scale ** 2}
+from .units import Units
 
 
 class Tracker:
     """Per-iteration bookkeeping: data units, rank and FFTs of each iteration, snapshots, progress, FFT work."""
 
-    def __init__(self, model, scale: float, snapshots=(), progress: Callable[[dict], None] | None = None):
+    def __init__(self, model, units: Units, snapshots=(), progress: Callable[[dict], None] | None = None):
+        """``units``: the solve's :class:`~clsdcam.units.Units` (snapshots and progress leave in data units)."""
         self.model = model
-        self.scale = scale
+        self.units = units
         self.snapshots = set(snapshots)
         self.progress = progress
         self.kept: dict[int, np.ndarray] = {}
@@ -41,9 +38,9 @@ class Tracker:
             transforms = record["transforms"]
             self.count(transforms, transforms * self.full_transforms / per_gradient if per_gradient else 0)
             if record["iteration"] in self.snapshots:
-                self.kept[record["iteration"]] = (self.model.window(problem.solution(x)) * self.scale).astype(np.float32)
+                self.kept[record["iteration"]] = self.units.cube(self.model.window(problem.solution(x)))
             if self.progress is not None:
-                self.progress(in_data_units(record, self.scale))
+                self.progress(self.units.record(record))
         return on_iteration
 
     def count(self, transforms: int, full_transforms: int = 0):

@@ -1,4 +1,4 @@
-/* ADMM's passes over the field (clsdcam/splitting.py derives them; clsdcam/kernel_splitting.py launches them).
+/* ADMM's passes over the field (clsdcam/algorithms/admm/ derives them; its kernel_steps.py launches them).
  * Cubes are (K, Hp, Wp) C-contiguous; the sensor window (H, W) sits at the field's origin; ξ, the filters f and the
  * x-step's gains g = f/(μ₁ + ‖f‖²) are (K, H, W); b is (H, W). The split arrays η and s hold one cube per active TV
  * axis, in axis order (λ, y, x). Differences along λ stop at the last band; along y and x they are circular. */

@@ -3,14 +3,14 @@
     x⁺ = prox_{s·g}(x − s·∇f(x)),
 
 one module against clsdcam.algorithms.base, nothing else of the package touched."""
-from clsdcam.algorithms.base import place, ratio
+from clsdcam.algorithms.base import Algorithm, place, ratio
 
 
-class ProximalGradient:
+class ProximalGradient(Algorithm):
     name = "pgm"
 
     def __init__(self, backend, x0, step: float, rules):
-        self.backend, self.step = backend, step
+        super().__init__(backend, x0, step, rules)
         self.x = self.z = None
         self.x, self.z = place(backend, [self.x, self.z], [x0, x0])
 

@@ -1,4 +1,4 @@
-"""ADMM (clsdcam.algorithms.admm, clsdcam.splitting): each closed-form step against a brute-force solve of its
+"""ADMM (clsdcam.algorithms.admm): each closed-form step against a brute-force solve of its
 sub-problem on a tiny case (in one block and in row blocks), the differences' adjoints, convergence to the problem's
 minimiser (FISTA's, where both are exact), and the solve around it (driver, checkpoints, Ctrl-C, warm starts, what it
 refuses)."""
@@ -15,7 +15,8 @@ from clsdcam.sim import simulate
 from clsdcam.solver import Settings, Solver
 from clsdcam.state import SolverState
 from clsdcam.backends import blocks
-from clsdcam.splitting import CalibrationTerms, Penalties, SplitState, Splitting, difference, difference_adjoint_add
+from clsdcam.algorithms.admm.host_steps import Splitting, difference, difference_adjoint_add
+from clsdcam.algorithms.admm.terms import TERMS_KEY, CalibrationTerms, Penalties, SplitState
 
 RNG = np.random.default_rng(7)
 
@@ -218,10 +219,10 @@ def test_a_solver_builds_the_calibrations_terms_once_and_a_fresh_solver_gives_th
     the reuse changes nothing: a second solve matches a new solver's bit for bit."""
     solver = Solver(leds.calibration, settings=Settings(iters=4, algorithm="admm"))
     first = solver.solve(leds.measurement)
-    terms = solver.splitting_terms()
+    terms = solver.shared[TERMS_KEY]
     divisors = terms._last[1][2]
     second = solver.solve(0.5 * leds.measurement)
-    assert solver.splitting_terms() is terms and terms._last[1][2] is divisors
+    assert solver.shared[TERMS_KEY] is terms and terms._last[1][2] is divisors
     fresh = Solver(leds.calibration, settings=Settings(iters=4, algorithm="admm")).solve(0.5 * leds.measurement)
     assert np.array_equal(second.cube, fresh.cube) and not np.array_equal(first.cube, second.cube)
 

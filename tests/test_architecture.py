@@ -75,6 +75,89 @@ def test_backends_import_nothing_above_them():
             assert not above, f"{name} imports {sorted(above)}"
 
 
+def imported_names(path: Path, known: set[str]) -> list[tuple[str, str]]:
+    """(module, name) for each ``from <clsdcam module> import name`` in ``path`` (relative or absolute)."""
+    name = module_name(path)
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([node.module] if node.module else []))
+            if base in known:
+                found += [(base, alias.name) for alias in node.names]
+    return found
+
+
+def test_no_private_name_is_imported_across_modules():
+    """A name with a leading underscore stays in its module: nothing imports one from another clsdcam module."""
+    known = modules()
+    private = [f"{name}: {source}.{imported}" for name, path in known.items()
+               for source, imported in imported_names(path, set(known))
+               if imported.startswith("_") and not imported.startswith("__")]
+    assert not private, private
+
+
+def test_code_above_the_backends_reaches_them_through_their_package_and_contract():
+    """Outside backends/, the only backend modules imported are ``clsdcam.backends`` (its lazy exports) and
+    ``clsdcam.backends.base`` (the contract): the rest is the backends' own business."""
+    allowed = {"clsdcam.backends", "clsdcam.backends.base"}
+    for name, targets in graph().items():
+        if not name.startswith("clsdcam.backends"):
+            inside = {t for t in targets if t.startswith("clsdcam.backends")} - allowed
+            assert not inside, f"{name} imports {sorted(inside)}"
+
+
+def test_the_calibration_sits_below_the_calibrate_commands():
+    """``clsdcam.calibrate`` (from lab frames to a calibration) builds on ``clsdcam.calibration``; nothing runs
+    back up: the calibration, and what it imports, reach no calibrate module."""
+    edges = graph()
+    assert any(t == "clsdcam.calibration" for name, targets in edges.items() if name.startswith("clsdcam.calibrate.")
+               for t in targets)
+    below = reachable(edges, "clsdcam.calibration") | {"clsdcam.calibration"}
+    assert not {m for m in below if m.startswith("clsdcam.calibrate")}, sorted(below)
+
+
+def test_no_code_name_outside_the_algorithms_and_backends_names_an_algorithm_or_tests_a_backends_name():
+    """ADMM lives in algorithms/admm (kernels in kernels/admm.cl, their launches behind backends.base.Programs):
+    outside algorithms/ and backends/ no identifier mentions it or its splittings, and no code compares a
+    backend's ``name`` with a string."""
+    for name, path in modules().items():
+        if name.startswith(("clsdcam.algorithms", "clsdcam.backends")):
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        identifiers = {node.id for node in ast.walk(tree) if isinstance(node, ast.Name)} | \
+                      {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)} | \
+                      {alias.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) for alias in node.names} | \
+                      {node.name for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.ClassDef))} | \
+                      {node.module or "" for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+        assert not [i for i in identifiers if "admm" in i.lower() or "splitting" in i.lower()], name
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Compare):
+                sides = [node.left, *node.comparators]
+                named = any(isinstance(s, ast.Attribute) and s.attr == "name" and
+                            "backend" in ast.unparse(s.value).lower() for s in sides)
+                assert not (named and any(isinstance(s, ast.Constant) and isinstance(s.value, str) for s in sides)), \
+                    f"{name}: {ast.unparse(node)}"
+
+
+def test_what_an_algorithm_can_do_is_declared_on_its_base_and_read_without_getattr():
+    """Every registered algorithm subclasses algorithms.base.Algorithm; no module reads the capabilities (or the
+    carry) with getattr or hasattr."""
+    from clsdcam.algorithms import ALGORITHMS
+    from clsdcam.algorithms.base import Algorithm
+
+    assert all(issubclass(cls, Algorithm) for cls in ALGORITHMS.values())
+    capabilities = {"monotone", "field_buffers", "band_space_only", "priors", "carry", "resume", "backends"}
+    for name, path in modules().items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("getattr", "hasattr"):
+                literal = [a.value for a in node.args[1:2] if isinstance(a, ast.Constant)]
+                assert not set(literal) & capabilities, f"{name}: {ast.unparse(node)}"
+
+
 def test_no_module_above_400_lines():
     long = {name: n for name, path in modules().items() if (n := len(path.read_text().splitlines())) > MAX_LINES}
     assert not long, long

@@ -204,12 +204,12 @@ def test_auto_workers_take_one_gpu_each_and_numpy_without_opencl(monkeypatch):
     monkeypatch.setattr(distributed, "get_worker", lambda: type("Worker", (), {"name": "3"})())
     monkeypatch.setattr(cl_devices, "import_pyopencl", lambda: type("cl", (), {"device_type": Types})())
     cpu = type("Device", (), {"type": Types.CPU})()
-    monkeypatch.setattr(cl_devices, "_all_devices", lambda: [(0, gpus[0]), (1, cpu), (2, gpus[1])])
+    monkeypatch.setattr(cl_devices, "all_devices", lambda: [(0, gpus[0]), (1, cpu), (2, gpus[1])])
     assert stream._worker_device("auto", None) is gpus[1] and stream._worker_device("opencl", None) is gpus[1]
     assert stream._worker_device("numpy", None) is None and stream._worker_device("auto", "gfx") == "gfx"
 
     def no_opencl():
         raise InputError("no OpenCL platform")
 
-    monkeypatch.setattr(cl_devices, "_all_devices", no_opencl)
+    monkeypatch.setattr(cl_devices, "all_devices", no_opencl)
     assert stream._worker_device("auto", None) is None

@@ -14,9 +14,10 @@ from clsdcam.calibrate.dark import corner_level, resolve_dark
 from clsdcam.calibrate.defects import find_defects
 from clsdcam.calibrate.frames import average_frames, open_sweep
 from clsdcam.calibrate.psf import calibrate_psf, centroid_of
-from clsdcam.calibrate.raw import RawSteps, apply_raw_steps, bin_pixels, read_record, shift_image, write_record
+from clsdcam.raw import RawSteps, apply_raw_steps, bin_pixels, read_record, shift_image, write_record
 from clsdcam.calibrate.sweep import power_weights, sweep_wavelengths
-from clsdcam.calibration import Calibration, Preprocessing, prepare, preprocess
+from clsdcam.calibrate.measurement import prepare
+from clsdcam.calibration import Calibration, Preprocessing, preprocess
 from clsdcam.cli import main
 from clsdcam.errors import InputError
 

@@ -370,7 +370,7 @@ def assert_reconstructs(simulation, priors, backend, iters):
     assert error <= 1e-4
 
 
-# ---- ADMM's steps (clsdcam.kernel_splitting against clsdcam.splitting) ------------------------------------
+# ---- ADMM's steps (algorithms/admm: kernel_steps against host_steps) ----------------------------------------
 STATE = ("v", "hv", "xi", "rho", "w", "eta", "s", "rest")
 
 
@@ -383,8 +383,9 @@ def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"]):
     from clsdcam.model import ForwardModel
     from clsdcam.priors import Sparsity, TotalVariation
     from clsdcam.solver import Settings
-    from clsdcam.spaces import band_splitting
-    from clsdcam.splitting import CalibrationTerms, Penalties
+    from clsdcam.algorithms.admm import band_steps
+    from clsdcam.algorithms.admm.terms import Penalties
+    from clsdcam.problem import Problem
 
     rng = np.random.default_rng(5)
     psf, filters, b = rng.random((6, 7)), rng.random((5, 6, 7)), rng.random((6, 7))
@@ -394,7 +395,7 @@ def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"]):
         priors = [Sparsity(be, 0.4, None)]
         if tv_weights is not None:
             priors.append(TotalVariation(be, 0.05, Settings(tv_weights=tv_weights)))
-        split = band_splitting(model, be.to_device(b), CalibrationTerms(model, filters), priors)
+        split = band_steps(Problem(model, be.to_device(b), None, None, model.n_bands, priors=priors, filters=filters))
         split.set_penalties(Penalties(data=0.3, tv=0.7, nonneg=1.3))
         pair.append(split)
     return pair
@@ -403,7 +404,7 @@ def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"]):
 def random_states(pair, backend):
     """The same state on both sides of ``pair``, every array and both spectra random (normal); made directly, with
     no transform (Oclgrind checks reikna's kernels for races only)."""
-    from clsdcam.splitting import SplitState
+    from clsdcam.algorithms.admm.terms import SplitState
 
     rng, split = np.random.default_rng(6), pair[0]
     cube, bands = split.shape, split.n_bands
@@ -465,6 +466,7 @@ def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(s
     """A second frame (half as bright) resumes from the first's splits and duals, rescaled on the device: its cube
     matches NumPy's second frame to 1e-4 (relative L2), and the device's upload of the terms is made once."""
     from clsdcam import Settings, Solver
+    from clsdcam.algorithms.admm.terms import TERMS_KEY
 
     settings, iters = Settings(iters=RECONSTRUCTION[cl_tiny][2], algorithm="admm", tv=3e-3), 5
     cubes, uploaded = [], []
@@ -472,9 +474,9 @@ def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(s
         solver = Solver(simulation.calibration, backend=backend, settings=settings)
         state = solver.solve(simulation.measurement).state
         assert state.carry is not None
-        uploaded.append({name: kept[2] for name, kept in solver.splitting_terms()._uploads.items()})
+        uploaded.append({name: kept[2] for name, kept in solver.shared[TERMS_KEY]._uploads.items()})
         cubes.append(solver.solve(0.5 * simulation.measurement, state=state, iters=iters).cube)
-        uploaded.append({name: kept[2] for name, kept in solver.splitting_terms()._uploads.items()})
+        uploaded.append({name: kept[2] for name, kept in solver.shared[TERMS_KEY]._uploads.items()})
     assert uploaded[0] == uploaded[1] == {}                                      # NumPy uploads nothing
     assert set(uploaded[2]) == {"filters", "transfer", "gain", "data transfer", "divisors"}
     assert all(uploaded[3][name] is array for name, array in uploaded[2].items())    # the same device arrays

@@ -8,7 +8,7 @@ import numpy as np
 import tifffile
 
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.calibrate.raw import bin_pixels
+from clsdcam.raw import bin_pixels
 from clsdcam.calibration import Calibration
 from clsdcam.cli import main
 from clsdcam.io import read_cube

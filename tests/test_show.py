@@ -135,7 +135,7 @@ def test_save_pictures_draws_the_spectra_of_each_light_by_default(monkeypatch, t
     import clsdcam.render as render
 
     drawn = []
-    monkeypatch.setattr(render, "spectra_figure", lambda *args: drawn.append(args[3]) or render._figure())
+    monkeypatch.setattr(render, "spectra_figure", lambda *args: drawn.append(args[3]) or render.new_figure())
     wavelengths = band_wavelengths(16)
     truth = make_scene("target", (32, 40), wavelengths)
     render.save_pictures(tmp_path / "p", truth * 0.5, wavelengths, truth=truth)

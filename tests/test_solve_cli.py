@@ -121,7 +121,7 @@ def fake_opencl(monkeypatch, *kinds: str):
     devices = [(platform, SimpleNamespace(type=getattr(device_type, kind), name=f"Fake {kind}", platform=platform))
                for kind in kinds]
     monkeypatch.setattr(cl_devices, "import_pyopencl", lambda: SimpleNamespace(device_type=device_type))
-    monkeypatch.setattr(cl_devices, "_all_devices", lambda: devices)
+    monkeypatch.setattr(cl_devices, "all_devices", lambda: devices)
     monkeypatch.delenv("PYOPENCL_CTX", raising=False)
 
 

@@ -120,7 +120,7 @@ def test_each_chunk_starts_cold_with_the_cold_budget_and_warms_the_rest(tmp_path
 def test_batch_applies_dark_and_bin_to_each_frame_as_reconstruct_does(tmp_path):
     """Frames at twice the calibration's size with a dark level: ``batch --dark 3 --bin 2`` solves each frame as
     ``prepare`` makes it (the same path as ``reconstruct``), frame by frame."""
-    from clsdcam.calibration import prepare
+    from clsdcam.calibrate.measurement import prepare
     from clsdcam.cli import main
 
     calibration, frames, truth = simulate_video("leds", 2, (12, 16), 4, seed=4, drift=(0.3, 0.6))

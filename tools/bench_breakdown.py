@@ -59,8 +59,9 @@ from clsdcam.priors import ProxAverage  # noqa: E402
 from clsdcam.problem import Problem  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
 from clsdcam.solver import Settings, Solver  # noqa: E402
-from clsdcam.spaces import Spaces  # noqa: E402
-from clsdcam.splitting import Splitting, SplittingBase  # noqa: E402
+from clsdcam.algorithms.admm import algorithm as admm_algorithm  # noqa: E402
+from clsdcam.algorithms.admm.host_steps import Splitting  # noqa: E402
+from clsdcam.algorithms.admm.terms import SplittingBase  # noqa: E402
 from clsdcam.subspace import SpectralSubspace  # noqa: E402
 
 TRANSFORMS = "transforms"
@@ -83,7 +84,7 @@ FFT_FUNCTIONS = ("fft", "ifft", "rfft", "irfft", "rfft2", "irfft2", "rfftn", "ir
 DEVICE_FFTS = [(engine, name, TRANSFORMS, False) for engine in (device_fft.HostFFT, device_fft.ReiknaFFT,
                                                                  device_fft.VkFFT) for name in ("forward", "inverse")]
 try:                                   # ADMM's kernels (needs pyopencl)
-    from clsdcam.kernel_splitting import KernelSplitting
+    from clsdcam.algorithms.admm.kernel_steps import KernelSplitting
     KERNEL_SPLITTING = [(KernelSplitting, "_divide", SPLITS, True), (KernelSplitting, "start", SETUP, True),
                         (KernelSplitting, "set_penalties", SETUP, True)]
 except ImportError:
@@ -97,7 +98,7 @@ PARTS = [(scipy.fft, name, TRANSFORMS, False) for name in FFT_FUNCTIONS] + DEVIC
     (Fista, "_extrapolate", MOMENTUM, False),
     (Admm, "iterate", SPLITS, False),
     (Splitting, "_divide", SPLITS, True),
-    (Spaces, "splitting", SETUP, True),
+    (admm_algorithm, "band_steps", SETUP, True),
     (SplittingBase, "set_penalties", SETUP, True),
     (Splitting, "start", SETUP, True),
     (Checkpoints, "check", OBJECTIVE, True),

@@ -30,7 +30,7 @@ import numpy as np
 
 from bench_accuracy import (ANGLE_MARGIN_DEG, PSNR_MARGIN_DB, Where, add_backend_option, panel_parser, report, save_json,
                             scene_points, size_text, solve)
-from clsdcam.render import _figure
+from clsdcam.render import new_figure
 from clsdcam.sim import band_wavelengths, shared_data_dir, simulate
 from clsdcam.sim.kinds import KINDS, make_kind, real_cubes
 
@@ -185,7 +185,7 @@ def plot(results: dict, path: Path):
     """``panel.png``: every scene's two margins (PSNR, angle) for each rule the panel judged, one colour a kind; a
     scene passes a rule when its point lies in the upper right quadrant."""
     panels = margin_panels(results)
-    fig = _figure(figsize=(5 * len(panels), 4.5))
+    fig = new_figure(figsize=(5 * len(panels), 4.5))
     for ax, (title, margins) in zip(np.atleast_1d(fig.subplots(1, len(panels))), panels):
         for kind in KINDS:
             found = kind_margins(results, kind, margins)
@@ -205,7 +205,7 @@ def plot_curves(results: dict, path: Path, per_row: int = 5):
     configuration judged (the sweep's fixed weights left out)."""
     scenes = results["scenes"]
     columns, rows = min(len(scenes), per_row), -(-len(scenes) // per_row)
-    fig = _figure(figsize=(3 * columns, 4.4 * rows))
+    fig = new_figure(figsize=(3 * columns, 4.4 * rows))
     axes = np.array(fig.subplots(2 * rows, columns, squeeze=False))
     for i, scene in enumerate(scenes):
         top, bottom = axes[2 * (i // per_row), i % per_row], axes[2 * (i // per_row) + 1, i % per_row]

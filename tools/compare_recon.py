@@ -8,7 +8,7 @@ equal).
     python tools/compare_recon.py compare before.npz after.npz  # exit 1 when a cube differs beyond --tol
 
 Runs: the accuracy panel's six scenes at ``--size`` (128×160×64) with the default, ``--no-skip``,
-``--subspace`` and ``--rank 8``, ``--iters`` (300) iterations each; the LED grid at ``--full-size`` (320×448)
+``--subspace``, ``--rank 8`` and ``--algorithm admm``, ``--iters`` (300) iterations each; the LED grid at ``--full-size`` (320×448)
 with the default and ``--no-skip``; a warm-started stream (the LED grid drifting, ``--frames`` frames, default
 and ``--subspace``, as a batch chunk runs it: ``clsdcam.batch.stream.next_solve``).
 """
@@ -21,7 +21,8 @@ import sys
 import numpy as np
 
 SCENES = ("target", "leds", "piecewise", "realcube", "sources", "lines")
-CONFIGS = {"default": {}, "no-skip": {"skip": False}, "subspace": {"subspace": True}, "rank8": {"rank": 8}}
+CONFIGS = {"default": {}, "no-skip": {"skip": False}, "subspace": {"subspace": True}, "rank8": {"rank": 8},
+           "admm": {"algorithm": "admm"}}
 FULL_CONFIGS = ("default", "no-skip")
 STREAM_CONFIGS = ("default", "subspace")
 

@@ -1,5 +1,5 @@
 """What an algorithm is to the driver (:mod:`clsdcam.driver`): one iteration at a time on a problem, and its own
-iterates.
+iterates; every algorithm subclasses :class:`Algorithm`, whose class attributes say what it can do.
 
 An algorithm minimises F(x) = f(x) + g(x) for a problem (:class:`clsdcam.problem.Problem`) that offers
 
@@ -7,7 +7,10 @@ An algorithm minimises F(x) = f(x) + g(x) for a problem (:class:`clsdcam.problem
     problem.prox(z, step, out)                        out = prox_{step·g}(z)
     problem.transforms()                              2-D FFTs one ∇f costs
 
-and keeps whatever iterates it needs. To the driver it is:
+and, for an algorithm with sub-problems of its own (ADMM's splits), the parts they are built from: ``problem.model``
+(A), ``problem.b``, ``problem.priors``, ``problem.filters``, ``problem.subspace`` (None in band space) and
+``problem.shared``, a store kept by the solver across its solves (what depends on the calibration alone is built
+once there). To the driver an algorithm is:
 
 * ``backend``: the backend its arrays live on; ``x``: the current iterate (what the checkpoints score and the
   solve returns); ``step``: its step size (the checkpoints halve it on a back-off);
@@ -19,37 +22,62 @@ and keeps whatever iterates it needs. To the driver it is:
   momentum kept. A mapping with ``keeps_shape`` true also takes ``out=``, an array of the iterates' shape other
   than its input, to write into (``clsdcam.spaces.BandMixing``).
 
-What it cannot do yet it declares as class attributes, which ``Settings`` and ``--backend auto`` read (absent: no
-limit): ``backends`` (the backend names it runs on; both built-in algorithms run on both), ``band_space_only`` (no
-``--subspace`` or ``--rank``) and ``priors`` (the prior names it has a step for). ``field_buffers``, the field cubes
-it keeps, sizes the device's memory plan (absent: FISTA's).
-
-Optionally, an algorithm with more state than its iterates keeps it across a video's frames: ``carry()`` returns it
-(or None) for :class:`clsdcam.state.SolverState`, and ``resume(carried, factor)`` takes it over before the first
-iteration, every array times ``factor`` (ADMM's splits and duals).
-
 A constructor ``(backend, x0, step, rules)`` copies x0 into its iterates (``rules``: :class:`clsdcam.driver.Rules`).
-A new algorithm is one module and one line in :data:`clsdcam.algorithms.ALGORITHMS`.
+A new algorithm is one module (or one folder, with its sub-problems) and one line in
+:data:`clsdcam.algorithms.ALGORITHMS`.
 """
 from __future__ import annotations
 
 import math
-from typing import Any, Protocol, Sequence
+from typing import Any, Sequence
+
+from ..errors import InputError
 
 
-class Algorithm(Protocol):
+class Algorithm:
+    """The base of every algorithm: what it can do, with defaults, read by the solver, the settings and the
+    checkpoints from here alone (SCICO's ``Optimizer``, SigPy's ``Alg``)."""
+
+    name = ""
+    monotone = True
+    """Its F never rises but by round-off: the checkpoints roll a rise back. False (ADMM): a rise is kept, and the
+    best iterate is what Ctrl-C returns."""
+    field_buffers: int | None = None
+    """The field cubes it keeps, for the device's memory plan (``cl_devices.problem_bytes``); None: FISTA's."""
+    band_space_only = False
+    """True: no ``--subspace`` or ``--rank`` (``move`` refuses a change of space)."""
+    priors: tuple[str, ...] | None = None
+    """The prior names it has a step for; None: every prior."""
+    backends: tuple[str, ...] | None = None
+    """The backend names it runs on (``--backend auto`` picks NumPy when OpenCL is not one); None: every backend."""
+
     backend: Any
     x: Any
     step: float
 
+    def __init__(self, backend, x0, step: float, rules):
+        self.backend, self.step = backend, step
+
     def iterate(self, problem) -> dict:
         """One iteration; the record's numbers (``data``, ``change``, ``transforms``, and the algorithm's own)."""
+        raise NotImplementedError
 
     def reset(self, point) -> None:
         """Every iterate to ``point`` (copied), momentum afresh."""
+        raise NotImplementedError
 
     def move(self, mapping) -> None:
         """Every iterate through ``mapping`` (into another space), momentum kept."""
+        raise InputError(f"--algorithm {self.name} runs in band space: no --subspace or --rank")
+
+    def carry(self):
+        """What a video's next frame resumes from besides its iterate (:class:`clsdcam.state.SolverState`), or
+        None: an algorithm with more state than its iterates (ADMM's splits and duals) returns it."""
+        return None
+
+    def resume(self, carried, factor: float) -> None:
+        """Take over ``carried`` (a previous solve's :meth:`carry`), every array times ``factor`` (its units to this
+        solve's), before the first iteration. Nothing to take over by default."""
 
 
 def place(backend, previous: Sequence, sources: Sequence) -> list:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from .base import place, ratio
+from .base import Algorithm, place, ratio
 
 
 def next_momentum(t: float) -> float:
@@ -36,14 +36,13 @@ def extrapolate_from_primitives(backend, x_new, x_old, beta: float, out, scratch
     return backend.axpy(beta, d, x_new, out=out)
 
 
-class Fista:
+class Fista(Algorithm):
     """FISTA's iterates (x, x_prev, y, z) and momentum t (see the module docstring)."""
 
     name = "fista"
 
     def __init__(self, backend, x0, step: float, rules):
-        self.backend = backend
-        self.step = step
+        super().__init__(backend, x0, step, rules)
         self.restart = rules.restart
         self.t = 1.0
         self.x = self.x_prev = self.y = self.z = None

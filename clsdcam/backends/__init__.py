@@ -1,7 +1,8 @@
 """Backends: the contract of ``base.py`` (Math, Platform, optional Fusions), on NumPy (reference) and OpenCL, chosen
 by name, or by ``auto`` (OpenCL on a GPU when one is found, else NumPy).
 
-The bottom layer: modules here import nothing of clsdcam's but ``errors`` and each other. The OpenCL
+The bottom layer: modules here import nothing of clsdcam's but ``errors`` and each other, and code above reaches
+them only through this module and ``base`` (:data:`EXPORTS`, each loaded on first use). The OpenCL
 backend is imported only when asked for (``auto`` imports pyopencl only to look for a GPU), so ``import clsdcam``
 and the NumPy backend work on machines without any OpenCL driver.
 """
@@ -10,6 +11,26 @@ from __future__ import annotations
 from ..errors import InputError
 
 BACKENDS = ("auto", "numpy", "opencl")
+
+EXPORTS = {   # name -> the module of this package that defines it, imported when the name is first used
+    **dict.fromkeys(("NumpyBackend",), "numpy"),
+    **dict.fromkeys(("OpenCLBackend",), "opencl"),
+    **dict.fromkeys(("map_blocks", "scratch_buffer", "THREADS_VARIABLE", "available_cores", "host_threads"), "blocks"),
+    **dict.fromkeys(("seen_bands",), "host_convolution"),
+    **dict.fromkeys(("CASES", "Inputs", "benchmarks"), "cases"),
+    **dict.fromkeys(("available_engines",), "fft"),
+    **dict.fromkeys(("all_devices", "import_pyopencl", "choose_device", "describe", "format_devices", "has_fp64",
+                     "is_cpu", "memory_limits", "MOST_BANDS", "bands_that_fit", "problem_bytes", "shortfall"),
+                    "cl_devices"),
+}
+
+
+def __getattr__(name):
+    if name in EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(f"{__name__}.{EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def resolve_backend(name: str, device: str | None = None) -> tuple[str, str]:

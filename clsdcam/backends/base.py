@@ -7,6 +7,11 @@ A backend owns arrays in one memory (NumPy's, or an OpenCL device's) and keeps t
 * :class:`Platform`, its memory and plumbing (arrays in and out, host views, the up-front memory check, FFT
   lengths) and what it says of itself (name, dtypes, device, FFT engine, path, threads).
 
+:class:`Programs` is optional too: a backend with compiled kernel programs (OpenCL) lets code outside it launch
+the kernels of ``kernels/`` by name (an algorithm's own steps, e.g. ADMM's ``kernels/admm.cl``); code asks
+``isinstance(backend, Programs)``, never a backend's name, and passes sizes with :func:`ints` and sums partials
+with :func:`total`.
+
 :class:`Fusions` (:data:`FUSIONS`) are optional: one pass over memory for what primitives do in several,
 owned by one algorithm (FISTA's momentum step and statistics, the subspace prox). Both backends provide them
 under these names and signatures; the algorithm looks one up with ``getattr(backend, name, None)`` and falls
@@ -229,6 +234,28 @@ class Fusions(Protocol):
         """c⁺ = Bᵀ·max(0, haar_tv(B·c)) (bandmix, haar_tv with nonneg, bandmix): the TV prox and non-negativity
         in band space for a cube of r coefficients c (r, H, W) in the span of B (K × r, orthonormal columns);
         out may alias c."""
+
+
+@runtime_checkable
+class Programs(Protocol):
+    """Optional: the backend's kernel programs for code outside it. ``kernels`` launches a kernel of ``kernels/*.cl``
+    by name in one of the launch shapes (``grid1(name, n, *args)``, ``grid2(name, n, rows, *args)``,
+    ``grid3(name, (B, H, W), *args)``, ``reduce(name, n, *args, outputs=1)`` → per-group partials on the host)."""
+
+    kernels: Any
+
+    def drained(self, value) -> Any:
+        """``value`` once the queue has finished (a scalar read from the device is then final)."""
+
+
+def ints(*values) -> list:
+    """Sizes and offsets as the kernels' ``int`` arguments."""
+    return [np.int32(v) for v in values]
+
+
+def total(partials: np.ndarray) -> float:
+    """A reduction's per-group partials added on the host, in float64."""
+    return float(np.sum(partials, dtype=np.float64))
 
 
 @runtime_checkable

@@ -28,7 +28,7 @@ def import_pyopencl():
     return pyopencl
 
 
-def _all_devices() -> list:
+def all_devices() -> list:
     """Every (platform, device) pair, or InputError when there is no OpenCL platform."""
     cl = import_pyopencl()
     try:
@@ -81,7 +81,7 @@ def list_devices() -> list[dict]:
         "max_alloc_mib": d.max_mem_alloc_size >> 20,
         "compute_units": d.max_compute_units,
         "fp64": has_fp64(d),
-    } for p, d in _all_devices()]
+    } for p, d in all_devices()]
 
 
 def format_devices() -> str:
@@ -103,7 +103,7 @@ def choose_device(substring: str | None = None):
     choice when that variable is set, else the first GPU, else the first CPU, else the first device
     (:func:`is_gpu`, :func:`is_cpu`).
     """
-    devices = _all_devices()
+    devices = all_devices()
     if substring:
         needle = substring.lower()
         for platform, device in devices:
@@ -124,7 +124,7 @@ def find_gpu():
     """The first OpenCL GPU (:func:`is_gpu`), or None when there is none, no driver or no pyopencl: never an error
     (what ``--backend auto`` asks before it chooses)."""
     try:
-        devices = _all_devices()
+        devices = all_devices()
     except InputError:          # no pyopencl (its import failed), no platform, no device
         return None
     return next((device for _, device in devices if is_gpu(device)), None)

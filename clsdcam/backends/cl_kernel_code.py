@@ -13,7 +13,7 @@ import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 
-from .cl_program import ints, total
+from .base import ints, total
 from .convolution import device_path
 
 GRAM_PIXELS = 64      # pixels per gram work item (at least)

@@ -140,16 +140,6 @@ class Kernels:
         return host[0].copy() if outputs == 1 else host.copy()
 
 
-def ints(*values) -> list:
-    """Sizes and offsets as the kernels' ``int`` arguments."""
-    return [np.int32(v) for v in values]
-
-
-def total(partials: np.ndarray) -> float:
-    """A reduction's per-group partials added on the host, in float64."""
-    return float(np.sum(partials, dtype=np.float64))
-
-
 def _power_of_two_at_least(n: int) -> int:
     return 1 << max(0, int(n) - 1).bit_length()
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import resolve_path
+from .base import ints, resolve_path, total
 from .cl_devices import (check_memory, check_problem, choose_device, context_queue, describe, import_pyopencl, is_cpu,
                          require_dtype)
 from .numpy import COMPLEX_OF, real_dtype
@@ -24,7 +24,7 @@ try:
     from .cl_host import MappedHostCode
     from .cl_kernel_code import KernelCode
     from .cl_memory import HostBuffers, mapped
-    from .cl_program import Kernels, ints, total
+    from .cl_program import Kernels
     from .fft import make_fft
     PATH_CODE = {"host": MappedHostCode, "device": KernelCode}     # a path's code for A and the HOST_CODE primitives
     _IMPORT_ERROR = None

@@ -17,7 +17,7 @@ fft, path, frame shape) and keeps the two last used (:func:`cached_solver`, an L
 later chunk: one build per Dask worker, not per frame. The calibration's preprocessing needs
 only the frame's shape (crop and size checks), so it runs on a zero frame of that shape (the
 one step that reads a frame's values, ``saturation``, is refused by :class:`BatchSpec`);
-each frame first gets its raw steps (:func:`clsdcam.calibration.raw_steps`: the calibration's recorded
+each frame first gets its raw steps (:func:`clsdcam.calibrate.measurement.raw_steps`: the calibration's recorded
 ones for a frame of its raw size, else ``--dark`` and ``--bin``), then the measurement's steps (crop,
 defect block, dead pixels).
 """
@@ -33,7 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, Preprocessing, preprocess, raw_steps
+from ..calibrate.measurement import raw_steps
+from ..calibration import Calibration, Preprocessing, preprocess
 from ..errors import InputError
 from ..io import atomic_output
 from ..solver import Settings, Solver
@@ -190,10 +191,10 @@ def _worker_device(backend: str, device: str | None):
         n = int(get_worker().name)
     except (ImportError, ValueError, TypeError):
         return None
-    from ..backends.cl_devices import _all_devices, import_pyopencl
+    from ..backends import all_devices, import_pyopencl
 
     try:
-        gpus = [d for _, d in _all_devices() if d.type & import_pyopencl().device_type.GPU]
+        gpus = [d for _, d in all_devices() if d.type & import_pyopencl().device_type.GPU]
     except InputError:  # no OpenCL here: ``auto`` becomes NumPy, ``opencl`` says why when its backend is built
         return None
     return gpus[n % len(gpus)] if gpus else None

@@ -17,7 +17,7 @@ import contextlib
 import os
 from dataclasses import dataclass
 
-from ..backends.blocks import THREADS_VARIABLE, available_cores, host_threads
+from ..backends import THREADS_VARIABLE, available_cores, host_threads
 from ..errors import InputError
 
 SPAWN_ENVIRON = "distributed.nanny.pre-spawn-environ"

@@ -23,7 +23,7 @@ from .bands import band_centres, check_edges, integrate_bands
 from .dark import resolve_dark
 from .defects import Defects, find_defects
 from .frames import open_sweep
-from .raw import RawSteps, shift_image
+from ..raw import RawSteps, shift_image
 from .sweep import exposure_weights, measure, power_weights, sweep_wavelengths
 
 

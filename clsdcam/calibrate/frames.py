@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError, shape_text
-from ..io import IMAGE_SUFFIXES, _read_image, _read_npy, as_real_array, existing_file, first_line, load_measurement
+from ..io import IMAGE_SUFFIXES, read_image, read_npy, as_real_array, existing_file, first_line, load_measurement
 from ..io import read_h5_dataset, require_finite
 
 FRAME_SUFFIXES = IMAGE_SUFFIXES + (".npy",)
@@ -81,7 +81,7 @@ def code_max(dtype) -> float | None:
 
 def _native(path: Path) -> np.ndarray:
     """One frame file as stored (its integer type kept), through clsdcam.io's readers."""
-    return _read_npy(path) if path.suffix.lower() == ".npy" else _read_image(path)
+    return read_npy(path) if path.suffix.lower() == ".npy" else read_image(path)
 
 
 def _folder(path: Path) -> Sweep:

@@ -1,6 +1,7 @@
 """A measurement's own raw steps: frames averaged, a dark removed, pixels binned (``clsdcam reconstruct
-MEASUREMENT… --average N --dark FILE…|LEVEL --bin N``; in Python :func:`clsdcam.calibration.prepare` with a list of
-files and ``Preprocessing(dark=…, bin=…)``): the same path for both.
+MEASUREMENT… --average N --dark FILE…|LEVEL --bin N``; in Python :func:`prepare` (``clsdcam.prepare``) with a list
+of files and ``Preprocessing(dark=…, bin=…)``): the same path for both, which ends in the calibration's
+preprocessing (:func:`clsdcam.calibration.preprocess`).
 
 1. frames: b = (1/n) Σ_i frame_i over the n files given (``--average N``: the first N);
 2. then the steps of :mod:`.raw` on b:
@@ -19,10 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..calibration import Calibration, Preprocessing, preprocess
 from ..errors import InputError, shape_text
+from ..raw import RawSteps, apply_raw_steps
 from .dark import resolve_dark
 from .frames import average_frames
-from .raw import RawSteps
 
 
 def mean_frame(measurement) -> tuple[np.ndarray, list[str]]:
@@ -61,3 +63,35 @@ def measurement_steps(raw: RawSteps | None, frame: np.ndarray, dark=None, bin: i
     if dark is None:
         return raw, "raw steps applied to the measurement"
     return replace(raw, dark_level=level, dark_frame=dark_frame), "raw steps applied to the measurement, its own dark"
+
+
+def prepare(measurement, calibration, options: "Preprocessing | None" = None, report=None):
+    """(calibration, measurement) ready to solve, the same way for the API and the command line. ``measurement``:
+    a file path, a list of file paths (their mean) or an array; ``calibration``: a :class:`Calibration` or a file
+    path. Then the measurement's raw steps (:func:`raw_steps`) and :func:`preprocess` with ``options`` (default:
+    :class:`Preprocessing` ()). The calibration's ``scale`` brings solved cubes back to its units.
+
+    What was done to the measurement (frames averaged, raw steps) is appended to the returned calibration's
+    ``source`` ("…; raw steps applied to the measurement: …"), and with it to the ``calibration`` attribute of a
+    cube solved on it; ``report`` (if given) is called with each of those lines."""
+    options = options or Preprocessing()
+    if not isinstance(calibration, Calibration):
+        calibration = Calibration.load(calibration)
+    measurement, averaged = mean_frame(measurement)
+    measurement, steps = raw_steps(calibration, measurement, options)
+    notes = averaged + steps
+    for line in notes if report else ():
+        report(line)
+    source = "; ".join([calibration.source, *notes])
+    return preprocess(replace(calibration, source=source), measurement, options)
+
+
+def raw_steps(calibration: Calibration, measurement, options: Preprocessing) -> tuple[np.ndarray, list[str]]:
+    """(measurement, notes) after the measurement's raw steps (the module docstring): the
+    calibration's recorded ones (``calibration.raw``) when the measurement has the recorded raw size, with
+    ``options.dark`` in place of the recorded dark when given; else ``options.dark`` and ``options.bin``."""
+    measurement = np.asarray(measurement, np.float64)
+    steps, label = measurement_steps(calibration.raw, measurement, options.dark, options.bin)
+    if steps is None:
+        return measurement, []
+    return apply_raw_steps(steps, measurement), [f"{label}: {steps.describe()}"]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..render import _figure, _save, save_autocorrelation, save_curves
+from ..render import new_figure, save_figure, save_autocorrelation, save_curves
 
 CURVES = 6
 
@@ -26,13 +26,13 @@ def save_psf_pictures(prefix, psf: np.ndarray) -> list[Path]:
     from ..sim import autocorrelation, autocorrelation_halfwidth
 
     image_path, corr_path = picture_paths(prefix, ("psf", "autocorrelation"))
-    fig = _figure(figsize=(6, 4.8))
+    fig = new_figure(figsize=(6, 4.8))
     ax = fig.subplots()
     shown = ax.imshow(psf, cmap="magma", vmax=np.percentile(psf, 99.9) or None, interpolation="nearest")
     ax.plot(psf.shape[1] // 2, psf.shape[0] // 2, "+", color="cyan", ms=12)
     ax.set(title=f"PSF {psf.shape[0]}×{psf.shape[1]} (+: centre, the PSF origin)", xlabel="x (px)", ylabel="y (px)")
     fig.colorbar(shown, ax=ax)
-    return [_save(fig, image_path),
+    return [save_figure(fig, image_path),
             save_autocorrelation(corr_path, autocorrelation(psf), autocorrelation_halfwidth(psf))]
 
 
@@ -40,14 +40,14 @@ def save_filter_pictures(prefix, wavelengths: np.ndarray, transmission: np.ndarr
     """The two filter pictures from t (N, H, W) at ``wavelengths`` (N,) and the defect map (H, W)."""
     map_path, curves_path = picture_paths(prefix, ("peak_wavelength", "transmission"))
     peak = np.where(defects, np.nan, wavelengths[np.argmax(transmission, axis=0)])
-    fig = _figure(figsize=(6.5, 4.8))
+    fig = new_figure(figsize=(6.5, 4.8))
     ax = fig.subplots()
     shown = ax.imshow(peak, cmap="turbo", interpolation="nearest")
     ax.set(title="peak wavelength of each pixel (nm; defects blank)", xlabel="x (px)", ylabel="y (px)")
     fig.colorbar(shown, ax=ax)
     top = transmission[:, ~defects].max() if not defects.all() else 1.0
     curves = {f"(y={y}, x={x})": (wavelengths, transmission[:, y, x] / top) for y, x in spread_pixels(peak, CURVES)}
-    return [_save(fig, map_path),
+    return [save_figure(fig, map_path),
             save_curves(curves_path, "transmission of a few filter pixels", "wavelength (nm)",
                         "t(λ) / max t (defects left out)", curves)]
 

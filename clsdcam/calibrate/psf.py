@@ -16,7 +16,7 @@ from ..errors import InputError, shape_text
 from ..geometry import psf_centre, psf_support
 from .dark import resolve_dark
 from .frames import average_frames
-from .raw import RawSteps, apply_raw_steps, shift_image
+from ..raw import RawSteps, apply_raw_steps, shift_image
 
 @dataclass(frozen=True, eq=False)
 class PsfCalibration:

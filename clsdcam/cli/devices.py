@@ -13,7 +13,7 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
-    from ..backends.cl_devices import format_devices
+    from ..backends import format_devices
     from .solve import chosen_backend
 
     print(format_devices())

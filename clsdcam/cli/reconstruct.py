@@ -28,7 +28,7 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
-    from ..calibration import prepare
+    from ..calibrate.measurement import prepare
     from ..io import check_output, read_cube
     from ..provenance import provenance
 

@@ -37,14 +37,15 @@ def chosen_backend(args) -> str:
     from ..backends import resolve_backend
 
     algorithm = getattr(args, "algorithm", "fista")
-    if args.backend == "auto" and "opencl" not in getattr(ALGORITHMS[algorithm], "backends", ("opencl",)):
+    runs_on = ALGORITHMS[algorithm].backends
+    if args.backend == "auto" and runs_on is not None and "opencl" not in runs_on:
         name, why = "numpy", f"--algorithm {algorithm} runs on NumPy"
     else:
         name, why = resolve_backend(args.backend, args.device)
     if why:
         where = ""
         if name == "opencl":
-            from ..backends.cl_devices import choose_device, describe
+            from ..backends import choose_device, describe
 
             where = f" on {describe(choose_device(args.device))}"
         print(f"backend: {name}{where} (auto: {why})")
@@ -72,7 +73,7 @@ def write(args, result, truth=None) -> int:
 LOG_EVERY = 10.0    # seconds between progress lines when stderr is not a terminal (a log file, a pipe)
 POOR_FIT = 0.1      # ‖Av − b‖/‖b‖ above this after a solve: the cube does not explain the measurement, …
 NOT_NOISE = 6.0     # … unless the residual is noise: rms(r)/σ̂(r) of 1.0–4.0 on the six simulated scenes, 8.6–18.8 with
-                    # another camera's calibration (Solver._residual_figures), …
+                    # another camera's calibration (Reconstruction._residual_figures), …
 TAIL = 10           # … or the solve was cut short: the data term's fall over its last TAIL iterations …
 LEVELLED = 0.1      # … is LEVELLED or more (leds, target: 62–93% after 5 to 14 iterations with the right calibration at
                     # 64×96×16 and 320×448×64; 1.1–5.7% after 60 with another camera's, 32×40×4 to 320×448×64)

@@ -20,7 +20,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..backends.numpy import NumpyBackend
+from ..backends import NumpyBackend
 from ..calibration import Calibration
 from ..errors import InputError
 from ..io import atomic_output, save_measurement

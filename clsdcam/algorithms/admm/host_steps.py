@@ -1,94 +1,16 @@
-"""ADMM's closed-form steps for the filter-array camera, in band space (:mod:`clsdcam.algorithms.admm` runs them).
-
-The problem, on the field (K, Hp, Wp) in the solver's units:
-
-    min_{v ≥ 0} ½‖b − S·F·H v‖² + τ Σ_d w_d ‖D_d v‖₁ (+ τ₁‖v‖₁)
-
-with H the PSF's circular convolution (its output frame has the sensor window at the origin), F the filters
-(per sensor pixel p, the K values f_p: (F x)_p = f_pᵀ x_p), S the window, and D_d the forward differences along
-the cube's axes d = λ, y, x (circular on the field's y and x; along λ the last difference is 0). Three splits,
-each with its scaled dual: x = H·v (data), u_d = D_d·v (TV), w = v (non-negativity, and L1). One iteration:
-
-* **c-step**, the only transforms: v = argmin μ₁/2‖Hv − x + ξ‖² + μ₂/2 Σ_d‖D_d v − u_d + η_d‖² + μ₃/2‖v − w + ρ‖²,
-
-      (μ₁HᵀH + μ₂ΣD_dᵀD_d + μ₃I) v = μ₁Hᵀ(x − ξ) + μ₂ΣD_dᵀ(u_d − η_d) + μ₃(w − ρ)
-
-  HᵀH and the spatial D_yᵀD_y, D_xᵀD_x are diagonal in the 2-D Fourier basis (|Ĥ|², 2 − 2cos(2πk/N)); D_λᵀD_λ,
-  the path graph's Laplacian along the bands, is diagonal in the orthonormal DCT-II along λ (eigenvalues
-  Λ_j = 2 − 2cos(πj/K)). So the system is one division per Fourier coefficient and DCT index:
-
-      v̂ = IDCT_λ[ DCT_λ(μ₁conj(Ĥ)·rfft2(x − ξ) + rfft2(μ₂ΣD_dᵀ(u_d − η_d) + μ₃(w − ρ)))
-                  / (μ₁|Ĥ|² + μ₂(|d̂_y|² + |d̂_x|²) + μ₂Λ_j + μ₃) ]
-
-  then v = irfft2(v̂) and Hv = irfft2(Ĥ·v̂): 2K forward and 2K inverse transforms, as one FISTA gradient.
-* **x-step**, per pixel (Sherman–Morrison): with q = Hv + ξ, argmin ½(b_p − f_pᵀx_p)² + μ₁/2‖x_p − q_p‖² is
-  x_p = q_p + f_p·(b_p − f_pᵀq_p)/(μ₁ + ‖f_p‖²) on the sensor window, x_p = q_p outside it.
-* **u-step**: u_d = soft(D_d v + η_d, τw_d/μ₂), the exact prox of the anisotropic TV (not the Haar average FISTA
-  uses: the two minimisers differ, so compare them against the truth, not the objective).
-* **w-step**: w = max(v + ρ − τ₁/μ₃, 0) (no L1 term: τ₁ = 0).
-
-Each split's dual follows its step: with q = K·v + dual, z = prox(q), dual⁺ = q − z, so what the next c-step needs
-of the split, z − dual⁺ = 2z − q, is formed in the same pass, and neither u nor x is kept:
-
-* data: ξ⁺ = −f_p·(b_p − f_pᵀq_p)/(μ₁ + ‖f_p‖²) on the window and 0 outside it (kept on the window only), and
-  x − ξ⁺ = q + 2(x − q) is written over Hv;
-* TV: η_d⁺ = clip(q, ±τw_d/μ₂) (the soft threshold's remainder) and s_d = u_d − η_d⁺ = q − 2η_d⁺;
-* non-negativity: ρ⁺ = q − w and μ₃(w − ρ⁺), the start of the next right-hand side, to which one more pass adds
-  μ₂ΣD_dᵀs_d.
-
-On NumPy (:class:`Splitting`) both passes and the spectral division run on cache-sized row blocks on the host's
-threads (``backends/blocks``): the iteration reads each cube about twice besides its transforms. On OpenCL they are
-kernels (:mod:`clsdcam.kernel_splitting`). The duals are scaled (ξ = λ/μ₁); the penalties are
-relative to the problem's own scales (:class:`Penalties`, :mod:`clsdcam.algorithms.admm`).
-"""
+"""ADMM's steps on NumPy arrays: :class:`Splitting`, the iteration :mod:`clsdcam.algorithms.admm` derives, with both
+passes and the spectral division on cache-sized row blocks on the host's threads (``backends/blocks``): the
+iteration reads each cube about twice besides its transforms. The first differences D_d and their adjoints are
+here too (the TV split's)."""
 from __future__ import annotations
-
-from dataclasses import astuple, dataclass
 
 import numpy as np
 import scipy.fft
 
-from .backends.blocks import map_blocks, scratch_buffer
-from .geometry import transfer_function
+from ...backends import map_blocks, scratch_buffer
+from .terms import CalibrationTerms, SplitState, SplittingBase
 
 FFT_CHUNK_BYTES = 4 << 20     # spectrum bytes per chunk of bands in the transforms (host_convolution's)
-
-
-@dataclass
-class Penalties:
-    """μ₁ (data split), μ₂ (TV split), μ₃ (non-negativity split), absolute."""
-
-    data: float
-    tv: float
-    nonneg: float
-
-
-@dataclass
-class SplitState:
-    """ADMM's arrays: v and Hv (the c-step's; Hv then holds x − ξ), ξ on the sensor window, ρ, w (the iterate),
-    η_d and s_d = u_d − η_d per active TV axis, the right-hand side's rest, the two spectra."""
-
-    v: np.ndarray
-    hv: np.ndarray
-    xi: np.ndarray
-    rho: np.ndarray
-    w: np.ndarray
-    eta: np.ndarray
-    s: np.ndarray
-    rest: np.ndarray
-    spectra: tuple
-
-
-def band_eigenvalues(n_bands: int) -> np.ndarray:
-    """Λ_j = 2 − 2cos(πj/K): the eigenvalues of DᵀD for the first differences along λ (last one 0), whose
-    eigenvectors are the orthonormal DCT-II's."""
-    return 2.0 - 2.0 * np.cos(np.pi * np.arange(n_bands) / n_bands)
-
-
-def difference_spectrum(n: int, half: bool = False) -> np.ndarray:
-    """|d̂(k)|² = 2 − 2cos(2πk/n) of the circular forward difference (k < n//2 + 1 when ``half``)."""
-    k = np.arange(n // 2 + 1 if half else n)
-    return 2.0 - 2.0 * np.cos(2.0 * np.pi * k / n)
 
 
 def _along(axis: int, index) -> tuple:
@@ -142,101 +64,6 @@ def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarr
     before = u[_along(axis, n - 1)] if above is None else above
     out[_along(axis, 0)] += scale * before
     return out
-
-
-class CalibrationTerms:
-    """What the steps need of one model's calibration alone, the filters f_p with their energies ‖f_p‖² and the
-    transfer function Ĥ with |Ĥ|², and of the penalties, the x-step's gains f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ) and the
-    c-step's divisors: built once and kept by the solver, so a video's frames do not rebuild them (the divisors
-    alone are a float64 pass over the whole spectrum); the terms of the last penalties are kept."""
-
-    def __init__(self, model, filters: np.ndarray):
-        self.dtype = np.dtype(model.backend.dtype)
-        self.cdtype = np.result_type(self.dtype, np.complex64)
-        self.field_shape, self.n_bands = model.field_shape, model.n_bands
-        self.filters = np.ascontiguousarray(filters, self.dtype)
-        self.filter_energy = np.einsum("khw,khw->hw", self.filters, self.filters, dtype=np.float64)
-        self.transfer = transfer_function(model.psf, model.geometry).astype(self.cdtype)
-        self.transfer_power = np.abs(self.transfer.astype(np.complex128)) ** 2
-        self._last = None           # ((penalties, TV axes), (gains, μ₁conj(Ĥ), divisors))
-        self._uploads: dict = {}    # term name -> (backend, host array, its device copy)
-
-    def for_penalties(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ), 1/(μ₁|Ĥ|² + μ₂(|d̂_y|² + |d̂_x|² + Λ_j) + μ₃)), TV's terms on ``axes`` only."""
-        key = (astuple(p), tuple(axes))
-        if self._last is None or self._last[0] != key:
-            self._last = (key, self._penalty_terms(p, axes))
-        return self._last[1]
-
-    def on_device(self, backend, name: str, host: np.ndarray, complex_: bool = False):
-        """``host``, the term called ``name``, on ``backend``'s device: uploaded once, and again only when the backend
-        or the host array (new penalties, new terms) is another."""
-        kept = self._uploads.get(name)
-        if kept is None or kept[0] is not backend or kept[1] is not host:
-            kept = (backend, host, backend.to_device(host, complex_))
-            self._uploads[name] = kept
-        return kept[2]
-
-    def _penalty_terms(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        gain = (self.filters / (p.data + self.filter_energy)).astype(self.dtype)
-        data_transfer = (p.data * np.conj(self.transfer)).astype(self.cdtype)
-        hp, wp = self.field_shape
-        spatial = p.data * self.transfer_power
-        if 1 in axes:
-            spatial = spatial + p.tv * difference_spectrum(hp)[:, None]
-        if 2 in axes:
-            spatial = spatial + p.tv * difference_spectrum(wp, half=True)[None, :]
-        spectral = p.tv * band_eigenvalues(self.n_bands) if 0 in axes else np.zeros(self.n_bands)
-        return gain, data_transfer, (1.0 / (spatial[None] + spectral[:, None, None] + p.nonneg)).astype(self.dtype)
-
-
-class SplittingBase:
-    """What ADMM's steps share on every backend: the problem's shapes and scales, and the penalties with what depends
-    on them. ``model``: the band space's :class:`~clsdcam.model.ForwardModel`; ``terms`` its
-    :class:`CalibrationTerms`; ``tv`` the :class:`~clsdcam.priors.TotalVariation` prior or None, ``l1`` the
-    :class:`~clsdcam.priors.Sparsity` prior or None (their weights are read at every step: an automatic weight chosen
-    mid-solve takes effect at once). A backend's steps (:class:`Splitting` on NumPy,
-    :class:`clsdcam.kernel_splitting.KernelSplitting` on OpenCL) add ``start``, ``c_step`` and ``splits``."""
-
-    def __init__(self, model, terms: CalibrationTerms, tv=None, l1=None):
-        self.terms = terms
-        self.dtype, self.cdtype = terms.dtype, terms.cdtype
-        self.field_shape = model.field_shape
-        self.sensor_shape = model.sensor_shape
-        self.shape = model.cube_shape
-        self.n_bands = model.n_bands
-        self.tv, self.l1 = tv, l1
-        self.axes = [axis for axis, weight in enumerate(tv.axis_weights) if weight > 0] if tv is not None else []
-        self.penalties: Penalties | None = None
-
-    # ---- the problem's scales ------------------------------------------------------------------------------
-    @property
-    def data_curvature(self) -> float:
-        """The mean of ‖f_p‖² over the sensor: the x-step's curvature from the data term."""
-        return float(np.mean(self.terms.filter_energy))
-
-    @property
-    def transfer_peak(self) -> float:
-        """max |Ĥ|² (the DC gain squared for a non-negative PSF)."""
-        return float(self.terms.transfer_power.max())
-
-    def set_penalties(self, penalties: Penalties):
-        """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`)."""
-        self.penalties = penalties
-        self._gain, self._data_transfer, self._inverse = self.terms.for_penalties(penalties, self.axes)
-
-    def threshold(self, axis: int) -> float:
-        """The u-step's soft threshold τw_d/μ₂ along ``axis``."""
-        return self.tv.weight * self.tv.axis_weights[axis] / self.penalties.tv
-
-    def nonneg_shift(self) -> float:
-        """The w-step's shift τ₁/μ₃ (0 without the L1 prior)."""
-        return self.l1.weight / self.penalties.nonneg if self.l1 is not None else 0.0
-
-    def iterate(self, state) -> tuple[float, tuple[float, float]]:
-        """The c-step then the splits: (½‖b − SFHv‖² at the new v, (‖w⁺ − w‖², ‖w⁺‖²))."""
-        self.c_step(state)
-        return self.splits(state)
 
 
 class Splitting(SplittingBase):

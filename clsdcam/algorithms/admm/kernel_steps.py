@@ -1,5 +1,6 @@
-"""ADMM's steps on an OpenCL device: :class:`KernelSplitting`, the same iteration as ``clsdcam.splitting.Splitting``
-(whose docstring derives it) on device arrays, on either path.
+"""ADMM's steps on a device with programs (the backend's optional :class:`~clsdcam.backends.base.Programs`, OpenCL's):
+:class:`KernelSplitting`, the same iteration as :class:`~clsdcam.algorithms.admm.host_steps.Splitting` (derived in
+:mod:`clsdcam.algorithms.admm`) on device arrays, on either path.
 
 * the splits are three kernels of ``kernels/admm.cl``: the x-step (one work item per sensor pixel, which also sums
   the data term), the w-step (which also sums ‖w⁺ − w‖² and ‖w⁺‖²) and the u-step (every active TV axis in one pass);
@@ -17,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft
 
-from .backends.cl_program import ints, total
-from .splitting import CalibrationTerms, SplitState, SplittingBase
+from ...backends.base import ints, total
+from .terms import CalibrationTerms, SplitState, SplittingBase
 
 
 def dct_matrix(n: int) -> np.ndarray:
@@ -32,8 +33,8 @@ def real_view(spectrum):
 
 
 class KernelSplitting(SplittingBase):
-    """ADMM's steps for one band-space problem on an OpenCL backend (the module docstring); ``b`` the normalised
-    measurement on the device."""
+    """ADMM's steps for one band-space problem on a backend with programs (the module docstring); ``b`` the
+    normalised measurement on the device."""
 
     def __init__(self, model, b, terms: CalibrationTerms, tv=None, l1=None):
         super().__init__(model, terms, tv, l1)

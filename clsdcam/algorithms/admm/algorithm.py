@@ -1,6 +1,6 @@
 """ADMM with closed-form steps (Boyd et al. 2011; the splits of Antipa et al.'s DiffuserCam solver, with the filter
-array's per-pixel inverse and the spectral TV's DCT): :mod:`clsdcam.splitting` holds the steps and their math, and
-docs/admm.md the derivation and the measurements. One iteration is the c-step (the transforms) and then each split's
+array's per-pixel inverse and the spectral TV's DCT): :mod:`clsdcam.algorithms.admm` derives the steps, and
+docs/admm.md has the measurements. One iteration is the c-step (the transforms) and then each split's
 step with its dual:
 
     v, Hv ← c-step(x − ξ, u − η, w − ρ);   x, ξ ← x-step(Hv + ξ);   u, η ← u-step(Dv + η);   w, ρ ← w-step(v + ρ)
@@ -13,31 +13,53 @@ balancing is not used: docs/admm.md).
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
 (:meth:`Admm.carry`, :meth:`Admm.resume`); a warm start from a cube (``x0``) starts its duals afresh. It runs in
-band space (``move`` refuses a change of space), on NumPy (``clsdcam.splitting.Splitting``) and on OpenCL
-(``clsdcam.kernel_splitting.KernelSplitting``).
+band space (``move`` refuses a change of space), on NumPy (:class:`~.host_steps.Splitting`) and on backends with
+programs (:class:`~.kernel_steps.KernelSplitting`): :func:`band_steps` picks them.
 """
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ..errors import InputError
-from .base import ratio
+from ...backends.base import Programs
+from ...errors import InputError
+from ...priors import Sparsity, TotalVariation
+from ..base import Algorithm, ratio
 
-if TYPE_CHECKING:                 # the parser lists the algorithms: splitting's SciPy is imported when one solves
-    from ..splitting import Penalties, SplittingBase
+if TYPE_CHECKING:                 # the parser lists the algorithms: the steps' SciPy is imported when one solves
+    from .terms import Penalties, SplittingBase
 
 DATA, TV, NONNEG = 1e-2, 1e-2, 1e-2
 
 
 def penalties_for(split: "SplittingBase") -> "Penalties":
     """The penalties from the problem's scales (the module docstring)."""
-    from ..splitting import Penalties
+    from .terms import Penalties
 
     data = DATA * split.data_curvature
     return Penalties(data=data, tv=TV * data * split.transfer_peak, nonneg=NONNEG * data * split.transfer_peak)
 
 
-class Admm:
+def band_steps(problem) -> "SplittingBase":
+    """ADMM's steps for a band-space ``problem`` under its TV and L1 priors (what the settings let ADMM take): the
+    kernels on a backend with programs (:class:`~clsdcam.backends.base.Programs`), else the host's NumPy steps; the
+    calibration's terms from the solver's shared store. InputError in a subspace."""
+    if problem.subspace is not None:
+        raise InputError("--algorithm admm runs in band space: no --subspace or --rank")
+    from .terms import calibration_terms
+
+    tv = next((p for p in problem.priors if isinstance(p, TotalVariation)), None)
+    l1 = next((p for p in problem.priors if isinstance(p, Sparsity)), None)
+    model, terms, backend = problem.model, calibration_terms(problem), problem.backend
+    if isinstance(backend, Programs):
+        from .kernel_steps import KernelSplitting
+
+        return KernelSplitting(model, problem.b, terms, tv, l1)
+    from .host_steps import Splitting
+
+    return Splitting(model, backend.to_host(problem.b), terms, tv, l1, backend.workers)
+
+
+class Admm(Algorithm):
     """ADMM's state for one band-space problem (see the module docstring)."""
 
     name = "admm"
@@ -47,11 +69,10 @@ class Admm:
     # model's field and a scratch (2); FISTA keeps 6
     field_buffers = 18
     band_space_only = True         # no splitting of a spectral subspace yet
-    priors = ("tv", "l1")          # the priors it has a closed-form step for (clsdcam.splitting)
+    priors = ("tv", "l1")          # the priors it has a closed-form step for (band_steps)
 
     def __init__(self, backend, x0, step: float, rules):
-        self.backend = backend
-        self.step = step
+        super().__init__(backend, x0, step, rules)
         self._start = backend.copy(x0)
         self.splitting: "SplittingBase | None" = None
         self.state = None
@@ -59,7 +80,7 @@ class Admm:
 
     def iterate(self, problem) -> dict:
         if self.splitting is None:
-            self.splitting = problem.splitting()
+            self.splitting = band_steps(problem)
             self.splitting.set_penalties(penalties_for(self.splitting))
             if self._resumed is not None and self._resumed.v.shape == self.splitting.shape:
                 self.state = self._resumed
@@ -67,7 +88,7 @@ class Admm:
                 self.reset(self.x)
             self._resumed = None
         data, (step, norm) = self.splitting.iterate(self.state)
-        return {"data": data, "change": ratio(step, norm), "transforms": 4 * self.splitting.n_bands}
+        return {"data": data, "change": ratio(step, norm), "transforms": self.splitting.transforms}
 
     @property
     def x(self):
@@ -92,6 +113,3 @@ class Admm:
             array = getattr(state, name)
             self.backend.scale(factor, array, out=array)
         self._resumed = state
-
-    def move(self, mapping) -> None:
-        raise InputError("--algorithm admm runs in band space: no --subspace or --rank")
