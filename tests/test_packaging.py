@@ -45,3 +45,4 @@ def test_wheel_ships_every_kernel_and_the_installed_package_finds_them(tmp_path)
                          capture_output=True, text=True, check=True).stdout.split()
     assert out[0].startswith(str(site)) and out[1].startswith(str(site)), out
     assert int(out[2]) > 1000
+
