@@ -9,13 +9,13 @@ Nothing heavy is imported here: the names below load their modules on first use.
 __version__ = "0.2.0"
 
 _LAZY = {
-    "Calibration": "clsdcam.calibration",
-    "Preprocessing": "clsdcam.calibration",
+    "Calibration": "clsdcam.camera.calibration",
+    "Preprocessing": "clsdcam.camera.calibration",
     "prepare": "clsdcam.calibrate.measurement",
-    "reconstruct": "clsdcam.solver",
-    "Solver": "clsdcam.solver",
-    "Settings": "clsdcam.settings",
-    "Result": "clsdcam.result",
+    "reconstruct": "clsdcam.solve.solver",
+    "Solver": "clsdcam.solve.solver",
+    "Settings": "clsdcam.solve.settings",
+    "Result": "clsdcam.solve.result",
     "InputError": "clsdcam.errors",
     "load_measurement": "clsdcam.io",
 }

@@ -21,11 +21,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import sim
-from .calibration import Calibration
-from .raw import bin_pixels, shift_image
+from .camera.calibration import Calibration
+from .camera.raw import bin_pixels, shift_image
 from .metrics import psnr, spectral_angle
 from .sim.scenes import SOURCE_FWHM, source_cube, source_lines, source_positions
-from .solver import reconstruct
+from .solve.solver import reconstruct
 
 COND_LIMIT = 40.0
 RAYLEIGH_DIP = 0.735          # resolved when the dip between two peaks is ≤ 73.5 % of the weaker peak

@@ -93,9 +93,9 @@ RECONSTRUCTIONS = {"fista": dict(tv=3e-3, lowrank=0.02, l1=1e-3, rank=3), "admm"
 def reconstruction_rows(backends: dict) -> list[Row]:
     """30 iterations of each algorithm (FISTA with every prior, band space then a rank-3 subspace; ADMM with TV and
     L1) against NumPy, on each path."""
-    from .settings import Settings
+    from .solve.settings import Settings
     from .sim import simulate
-    from .solver import Solver
+    from .solve.solver import Solver
 
     sim = simulate(scene="leds", shape=(32, 48), n_bands=8, seed=0)
     rows = []

@@ -25,7 +25,7 @@ class Inputs:
 
     @classmethod
     def of(cls, frame=None, frame_source: str = "", calibration=None, calibration_source: str = "") -> "Inputs":
-        """From a frame and a :class:`clsdcam.calibration.Calibration` (either may be None)."""
+        """From a frame and a :class:`clsdcam.camera.calibration.Calibration` (either may be None)."""
         if calibration is None:
             return cls(frame, frame_source)
         return cls(frame, frame_source, calibration.psf, calibration.filters, calibration.wavelengths,

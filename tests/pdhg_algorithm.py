@@ -10,14 +10,14 @@ the exact anisotropic TV (ADMM's u-split's, not FISTA's Haar average), with a du
 
 It converges for 1/s − σ‖D‖² ≥ L/2; with the driver's s = 1/L and ‖D‖² ≤ 4 per axis, σ = 1/(2·4·n_axes·s).
 The dual is a sub-problem object built, at the first iteration, from what the problem hands an algorithm (its priors
-and the shared store, clsdcam.problem.Problem); it runs on the host, so the plug-in runs on any backend; a video's
+and the shared store, clsdcam.solve.problem.Problem); it runs on the host, so the plug-in runs on any backend; a video's
 next frame resumes from the last frame's dual (``carry``/``resume``). One module, nothing of the package touched.
 """
 import numpy as np
 
 from clsdcam.algorithms.admm.host_steps import difference, difference_adjoint_add
 from clsdcam.algorithms.base import Algorithm, ratio
-from clsdcam.priors import TotalVariation
+from clsdcam.solve.priors import TotalVariation
 
 
 class TvDual:

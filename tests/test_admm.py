@@ -9,11 +9,11 @@ from clsdcam.algorithms import admm
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr
-from clsdcam.model import ForwardModel
-from clsdcam.priors import Sparsity, TotalVariation
+from clsdcam.camera.model import ForwardModel
+from clsdcam.solve.priors import Sparsity, TotalVariation
 from clsdcam.sim import simulate
-from clsdcam.solver import Settings, Solver
-from clsdcam.state import SolverState
+from clsdcam.solve.solver import Settings, Solver
+from clsdcam.solve.state import SolverState
 from clsdcam.backends import blocks
 from clsdcam.algorithms.admm.host_steps import Splitting, difference, difference_adjoint_add
 from clsdcam.algorithms.admm.terms import TERMS_KEY, CalibrationTerms, Penalties, SplitState

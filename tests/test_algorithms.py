@@ -12,8 +12,8 @@ from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr
 from clsdcam.sim import simulate
-from clsdcam.solver import Settings, Solver
-from clsdcam.space_policy import WARMUP
+from clsdcam.solve.solver import Settings, Solver
+from clsdcam.solve.space_policy import WARMUP
 from conftest import opencl_device
 from pgm_algorithm import ProximalGradient
 

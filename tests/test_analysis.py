@@ -12,7 +12,7 @@ from clsdcam import analyses, analysis, sim
 from clsdcam.cli import analyze as cli_analyze
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.metrics import psnr
-from clsdcam.model import ForwardModel
+from clsdcam.camera.model import ForwardModel
 
 SHAPE = (9, 12)
 RNG = np.random.default_rng(0)

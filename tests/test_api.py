@@ -10,8 +10,8 @@ import clsdcam
 def test_top_level_names_are_the_documented_objects():
     from clsdcam import Calibration, reconstruct
 
-    assert callable(reconstruct) and reconstruct.__module__ == "clsdcam.solver"
-    import clsdcam.solver  # noqa: F401  (importing the module must not shadow the function)
+    assert callable(reconstruct) and reconstruct.__module__ == "clsdcam.solve.solver"
+    import clsdcam.solve.solver  # noqa: F401  (importing the module must not shadow the function)
 
     assert clsdcam.reconstruct is reconstruct and Calibration.__name__ == "Calibration"
 

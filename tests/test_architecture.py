@@ -111,12 +111,12 @@ def test_code_above_the_backends_reaches_them_through_their_package_and_contract
 
 
 def test_the_calibration_sits_below_the_calibrate_commands():
-    """``clsdcam.calibrate`` (from lab frames to a calibration) builds on ``clsdcam.calibration``; nothing runs
+    """``clsdcam.calibrate`` (from lab frames to a calibration) builds on ``clsdcam.camera.calibration``; nothing runs
     back up: the calibration, and what it imports, reach no calibrate module."""
     edges = graph()
-    assert any(t == "clsdcam.calibration" for name, targets in edges.items() if name.startswith("clsdcam.calibrate.")
-               for t in targets)
-    below = reachable(edges, "clsdcam.calibration") | {"clsdcam.calibration"}
+    assert any(t == "clsdcam.camera.calibration" for name, targets in edges.items()
+               if name.startswith("clsdcam.calibrate.") for t in targets)
+    below = reachable(edges, "clsdcam.camera.calibration") | {"clsdcam.camera.calibration"}
     assert not {m for m in below if m.startswith("clsdcam.calibrate")}, sorted(below)
 
 
@@ -163,9 +163,9 @@ def test_no_module_above_400_lines():
     assert not long, long
 
 
-SOLVE_CORE = ("clsdcam.driver", "clsdcam.checkpoints", "clsdcam.algorithms", "clsdcam.phases", "clsdcam.space_policy",
-              "clsdcam.spaces", "clsdcam.auto_weights", "clsdcam.state", "clsdcam.tracker", "clsdcam.problem",
-              "clsdcam.subspace")
+SOLVE_CORE = tuple(f"clsdcam.solve.{name}" for name in (
+    "driver", "checkpoints", "phases", "space_policy", "spaces", "auto_weights", "state", "tracker", "problem",
+    "subspace")) + ("clsdcam.algorithms",)
 
 
 def reachable(edges: dict[str, set[str]], start: str) -> set[str]:
@@ -178,13 +178,13 @@ def reachable(edges: dict[str, set[str]], start: str) -> set[str]:
 
 
 def test_the_loop_the_policy_and_the_spaces_never_reach_the_solver():
-    """No module of the loop, the policy or the spaces imports clsdcam.solver, directly or through another, or
+    """No module of the loop, the policy or the spaces imports clsdcam.solve.solver, directly or through another, or
     takes a parameter named ``solver``."""
     edges = graph()
     core = [name for name in edges if name.startswith(SOLVE_CORE)]
     assert len(core) >= len(SOLVE_CORE)
     for name in core:
-        assert "clsdcam.solver" not in reachable(edges, name), name
+        assert "clsdcam.solve.solver" not in reachable(edges, name), name
         tree = ast.parse(modules()[name].read_text(encoding="utf-8"))
         parameters = {a.arg for node in ast.walk(tree) if isinstance(node, ast.arguments)
                       for a in node.args + node.kwonlyargs}
@@ -218,7 +218,7 @@ def test_the_contract_is_narrow():
     assert all(hasattr(be, name) for name in protocol_attributes(Platform))
 
 
-HEAVY = ("scipy", "h5py", "matplotlib", "pyopencl", "dask", "distributed", "clsdcam.solver", "clsdcam.sim",
+HEAVY = ("scipy", "h5py", "matplotlib", "pyopencl", "dask", "distributed", "clsdcam.solve.solver", "clsdcam.sim",
          "clsdcam.analysis", "clsdcam.batch")
 
 

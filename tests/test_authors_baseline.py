@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.model import ForwardModel
+from clsdcam.camera.model import ForwardModel
 from clsdcam.sim import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))

@@ -1,12 +1,12 @@
-"""The automatic-weight hook (clsdcam.auto_weights): due once, at AUTO_AT, only while a weight is pending; it
+"""The automatic-weight hook (clsdcam.solve.auto_weights): due once, at AUTO_AT, only while a weight is pending; it
 chooses from the residual's noise and the driver rescores under the new objective."""
 import numpy as np
 import pytest
 
-from clsdcam.auto_weights import AUTO_AT, AutoWeights
+from clsdcam.solve.auto_weights import AUTO_AT, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.priors import build_priors
-from clsdcam.settings import Settings
+from clsdcam.solve.priors import build_priors
+from clsdcam.solve.settings import Settings
 
 BACKEND = NumpyBackend("float64")
 

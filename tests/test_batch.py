@@ -20,13 +20,13 @@ from distributed import Client, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from clsdcam.batch import BatchSpec, FrameSource, parts, parts_dir, run_batch, stream
-from clsdcam.calibration import Calibration, PixelMask, Preprocessing, preprocess
+from clsdcam.camera.calibration import Calibration, PixelMask, Preprocessing, preprocess
 from clsdcam.cli import main
 from clsdcam.errors import InputError
 from clsdcam.algorithms.fista import Fista
 from clsdcam.provenance import provenance, sha256
 from clsdcam.sim.video import simulate_video, write_video
-from clsdcam.solver import Settings, Solver, reconstruct
+from clsdcam.solve.solver import Settings, Solver, reconstruct
 
 N_FRAMES = 8
 SOLVE = Solver.solve

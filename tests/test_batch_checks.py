@@ -14,11 +14,11 @@ from clsdcam.backends.blocks import THREADS_VARIABLE, available_cores, host_thre
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.batch import FrameSource, frames, parts_dir, stream, workers
 from clsdcam.batch.workers import Layout, plan_workers
-from clsdcam.calibration import Preprocessing
+from clsdcam.camera.calibration import Preprocessing
 from clsdcam.cli import main
 from clsdcam.errors import InputError
 from clsdcam.sim.video import simulate_video, write_video
-from clsdcam.solver import Settings, Solver
+from clsdcam.solve.solver import Settings, Solver
 
 N_FRAMES, BAD = 6, (1, 2, 3)  # the bad value: frame 1, pixel (y, x) = (2, 3)
 

@@ -14,10 +14,10 @@ from clsdcam.calibrate.dark import corner_level, resolve_dark
 from clsdcam.calibrate.defects import find_defects
 from clsdcam.calibrate.frames import average_frames, open_sweep
 from clsdcam.calibrate.psf import calibrate_psf, centroid_of
-from clsdcam.raw import RawSteps, apply_raw_steps, bin_pixels, read_record, shift_image, write_record
+from clsdcam.camera.raw import RawSteps, apply_raw_steps, bin_pixels, read_record, shift_image, write_record
 from clsdcam.calibrate.sweep import power_weights, sweep_wavelengths
 from clsdcam.calibrate.measurement import prepare
-from clsdcam.calibration import Calibration, Preprocessing, preprocess
+from clsdcam.camera.calibration import Calibration, Preprocessing, preprocess
 from clsdcam.cli import main
 from clsdcam.errors import InputError
 
@@ -375,7 +375,7 @@ def lab(tmp_path_factory):
 def test_simulated_sweep_recovers_the_filters_and_the_reconstruction(lab, tmp_path):
     from clsdcam.io import read_cube
     from clsdcam.metrics import psnr
-    from clsdcam.solver import reconstruct
+    from clsdcam.solve.solver import reconstruct
 
     darks = sorted(str(p) for p in (lab / "dark").glob("*.tif"))
     assert main(["calibrate", "filters", str(lab / "sweep"), "--wavelengths", str(lab / "sweep_wavelengths.csv"),

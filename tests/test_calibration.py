@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from clsdcam.calibration import Calibration, PixelMask, Preprocessing, parse_crop, preprocess, zero_defect_block
+from clsdcam.camera.calibration import Calibration, PixelMask, Preprocessing, parse_crop, preprocess, zero_defect_block
 from clsdcam.errors import InputError
 from clsdcam.io import load_measurement
 

@@ -195,9 +195,9 @@ def test_scene_names_are_the_simulators():
 def test_an_unusable_output_is_refused_before_any_work(simulated, tmp_path, capsys, monkeypatch, where):
     """-o naming a directory or an unwritable place, or an unwritable picture prefix: exit 2 with one line
     before the solve starts (it used to fail after the whole solve, with a traceback)."""
-    import clsdcam.solver
+    import clsdcam.solve.solver
 
-    monkeypatch.setattr(clsdcam.solver.Solver, "solve", lambda *a, **k: pytest.fail("solved before the check"))
+    monkeypatch.setattr(clsdcam.solve.solver.Solver, "solve", lambda *a, **k: pytest.fail("solved before the check"))
     output = {"directory": tmp_path, "unwritable": "/proc/nope/cube.h5", "pictures": tmp_path / "ok.h5"}[where]
     extra = ["--png", "/proc/nope/pic"] if where == "pictures" else []
     assert run_reconstruct(simulated, output, *extra) == 2

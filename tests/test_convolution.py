@@ -6,7 +6,7 @@ import clsdcam.backends.host_convolution as host_convolution
 from clsdcam.backends.convolution import HostPathConvolution, PrimitiveConvolution
 from clsdcam.backends.host_convolution import HostConvolution, band_chunks
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.geometry import support_geometry, transfer_function
+from clsdcam.camera.geometry import support_geometry, transfer_function
 
 SENSOR, FIELD_PSF = (21, 34), ((4, 15), (6, 29))
 

@@ -70,10 +70,11 @@ def test_check_runs_every_primitive_case_and_times_each_benchmark_case(monkeypat
 def test_a_problem_too_large_for_the_device_is_one_line_and_exit_2(monkeypatch, tmp_path, capsys):
     """``clsdcam reconstruct --backend opencl`` on a device too small for the problem: exit 2 before any solve, one
     line naming what it needs, what the device has and how many bands would fit; no output file."""
-    import clsdcam.solver
+    import clsdcam.solve.solver
 
     assert main(["simulate", str(tmp_path), "--size", "32x40", "--bands", "4", "--scene", "leds", "--seed", "3"]) == 0
-    monkeypatch.setattr(clsdcam.solver.Solver, "solve", lambda *a, **k: pytest.fail("solved a problem that cannot fit"))
+    monkeypatch.setattr(clsdcam.solve.solver.Solver, "solve",
+                        lambda *a, **k: pytest.fail("solved a problem that cannot fit"))
     report_memory(monkeypatch, 64 << 10)
     capsys.readouterr()
     output = tmp_path / "cube.h5"

@@ -1,4 +1,5 @@
-"""The driver (clsdcam.driver) running FISTA: a closed-form problem, stopping rules, checkpoints, back-off, Ctrl-C,
+"""The driver (clsdcam.solve.driver) running FISTA: a closed-form problem, stopping rules, checkpoints, back-off,
+Ctrl-C,
 moves between spaces."""
 
 import numpy as np
@@ -6,7 +7,7 @@ import pytest
 
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.algorithms.fista import Fista
-from clsdcam.driver import Driver, Functions, Rules, minimize
+from clsdcam.solve.driver import Driver, Functions, Rules, minimize
 
 BACKEND = NumpyBackend("float64")
 

@@ -9,7 +9,7 @@ import pytest
 
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.sim import simulate
-from clsdcam.solver import reconstruct
+from clsdcam.solve.solver import reconstruct
 
 FLOORS = {  # scene: (min PSNR dB, max mean spectral angle °) after 150 iterations, 48×64×16
     "target": (16.0, 13.0),
@@ -56,7 +56,7 @@ def test_stopping_rules_do_not_depend_on_the_measurements_units():
 
 
 def test_excluding_saturated_pixels_recovers_a_clipped_measurement():
-    from clsdcam.calibration import Preprocessing, preprocess
+    from clsdcam.camera.calibration import Preprocessing, preprocess
 
     sim = simulate(scene="target", shape=(48, 64), n_bands=8, seed=4)
     level = 0.3 * sim.measurement.max()  # ~6 % of the pixels saturate
@@ -71,7 +71,7 @@ def test_excluding_saturated_pixels_recovers_a_clipped_measurement():
 
 def test_warm_start_from_a_window_cube_or_a_whole_field():
     from clsdcam.errors import InputError
-    from clsdcam.solver import Settings, Solver
+    from clsdcam.solve.solver import Settings, Solver
 
     sim = simulate(scene="leds", shape=(24, 32), n_bands=4, seed=5)
     solver = Solver(sim.calibration, settings=Settings(iters=40, full_field=True))

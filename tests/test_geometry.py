@@ -6,8 +6,8 @@ from scipy.signal import fftconvolve
 
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
-from clsdcam.geometry import centred_geometry, psf_support, support_geometry, transfer_function
-from clsdcam.model import ForwardModel
+from clsdcam.camera.geometry import centred_geometry, psf_support, support_geometry, transfer_function
+from clsdcam.camera.model import ForwardModel
 
 BE = NumpyBackend("float64")
 

@@ -6,7 +6,7 @@ from clsdcam.errors import InputError
 from clsdcam.sim import band_wavelengths, simulate
 from clsdcam.sim.kinds import KINDS, make_kind, real_cubes, spectra
 from clsdcam.sim.scenes import border_px, shared_data_dir
-from clsdcam.subspace import Spectra, lit_shapes
+from clsdcam.solve.subspace import Spectra, lit_shapes
 
 SHAPE, WAVELENGTHS = (48, 64), band_wavelengths(32)
 NEEDS_DATA = pytest.mark.skipif(not real_cubes(shared_data_dir()), reason="no real cube in ../shared/data")

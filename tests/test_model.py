@@ -4,7 +4,7 @@ import pytest
 from scipy.signal import fftconvolve
 
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.model import ForwardModel, window_offset
+from clsdcam.camera.model import ForwardModel, window_offset
 
 
 def random_model(rng, sensor=(21, 34), bands=5, field=None, dtype="float32"):

@@ -13,7 +13,7 @@ SCRIPT = textwrap.dedent("""
     import clsdcam
     from clsdcam.backends import get_backend
     from clsdcam.errors import InputError
-    from clsdcam.model import ForwardModel
+    from clsdcam.camera.model import ForwardModel
 
     rng = np.random.default_rng(0)
     model = ForwardModel(get_backend("numpy"), rng.random((5, 7)), rng.random((2, 5, 7)))

@@ -3,12 +3,12 @@ import numpy as np
 import pytest
 
 from clsdcam.errors import InputError
-from clsdcam.noise import residual_noise
-from clsdcam.priors import AUTO, TotalVariation
-from clsdcam.settings import Settings
-from clsdcam.auto_weights import AUTO_AT
+from clsdcam.solve.noise import residual_noise
+from clsdcam.solve.priors import AUTO, TotalVariation
+from clsdcam.solve.settings import Settings
+from clsdcam.solve.auto_weights import AUTO_AT
 from clsdcam.sim import noiseless_measurement, simulate
-from clsdcam.solver import reconstruct
+from clsdcam.solve.solver import reconstruct
 
 
 def test_residual_noise_reads_white_noise_under_a_smooth_signal():

@@ -167,7 +167,7 @@ def test_unknown_device_lists_the_available_ones():
 
 @pytest.mark.parametrize("field", [None, (25, 33)])
 def test_forward_model_and_adjoint(field, engine):
-    from clsdcam.model import ForwardModel
+    from clsdcam.camera.model import ForwardModel
 
     rng = np.random.default_rng(7)
     psf, filters = rng.random(SENSOR), rng.random((K, *SENSOR))
@@ -193,7 +193,7 @@ def simulation(cl_tiny):
 
 def test_convolution_with_unseen_bands_and_fused_step(engine):
     """The model's convolution on OpenCL (mapped host pipeline or primitives) against NumPy's, bands 1 and 3 unseen."""
-    from clsdcam.geometry import support_geometry, transfer_function
+    from clsdcam.camera.geometry import support_geometry, transfer_function
 
     rng = np.random.default_rng(8)
     psf, filters = np.zeros(SENSOR), rng.random((5, *SENSOR))
@@ -380,12 +380,12 @@ TV_AXES = {"every axis": (1.0, 0.5, 2.0), "not λ": (1.0, 1.0, 0.0), "x only": (
 def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"]):
     """ADMM's steps on a 5-band camera of 6×7 pixels (TV with ``tv_weights`` along x, y, λ as ``--tv-weights``, or
     none; L1; a positive b), on NumPy and on ``backend``, with the same penalties."""
-    from clsdcam.model import ForwardModel
-    from clsdcam.priors import Sparsity, TotalVariation
-    from clsdcam.solver import Settings
+    from clsdcam.camera.model import ForwardModel
+    from clsdcam.solve.priors import Sparsity, TotalVariation
+    from clsdcam.solve.solver import Settings
     from clsdcam.algorithms.admm import band_steps
     from clsdcam.algorithms.admm.terms import Penalties
-    from clsdcam.problem import Problem
+    from clsdcam.solve.problem import Problem
 
     rng = np.random.default_rng(5)
     psf, filters, b = rng.random((6, 7)), rng.random((5, 6, 7)), rng.random((6, 7))

@@ -6,9 +6,9 @@ import pytest
 from scipy.optimize import minimize_scalar
 
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.priors import (PRIORS, LowRank, ProxAverage, Sparsity, SpectralSmoothness, TotalVariation, build_priors,
-                            prox_lowrank, singular_values)
-from clsdcam.settings import Settings
+from clsdcam.solve.priors import (PRIORS, LowRank, ProxAverage, Sparsity, SpectralSmoothness, TotalVariation,
+                                  build_priors, prox_lowrank, singular_values)
+from clsdcam.solve.settings import Settings
 
 BE = NumpyBackend("float64")
 

@@ -8,15 +8,15 @@ import numpy as np
 import tifffile
 
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.raw import bin_pixels
-from clsdcam.calibration import Calibration
+from clsdcam.camera.raw import bin_pixels
+from clsdcam.camera.calibration import Calibration
 from clsdcam.cli import main
 from clsdcam.io import read_cube
 from clsdcam.metrics import psnr
-from clsdcam.model import ForwardModel
+from clsdcam.camera.model import ForwardModel
 from clsdcam.sim.camera import simulate
 from clsdcam.sim.sweep import band_filters, sweep_of, write_sweep
-from clsdcam.solver import reconstruct
+from clsdcam.solve.solver import reconstruct
 
 FACTOR = 8  # 1200×1600 → 150×200, as the tutorial downsamples by powers of two
 

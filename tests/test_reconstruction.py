@@ -1,4 +1,5 @@
-"""One solve (clsdcam.reconstruction, clsdcam.units): every figure that leaves a solve is in one set of units, the
+"""One solve (clsdcam.solve.reconstruction, clsdcam.solve.units): every figure that leaves a solve is in one set of
+units, the
 per-solve state stays on the solve, and the Solver keeps only what serves all of its solves."""
 from dataclasses import replace
 
@@ -7,8 +8,8 @@ import pytest
 
 from clsdcam import prepare
 from clsdcam.sim import simulate
-from clsdcam.solver import Settings, Solver
-from clsdcam.units import Units
+from clsdcam.solve.solver import Settings, Solver
+from clsdcam.solve.units import Units
 
 
 @pytest.fixture(scope="module")

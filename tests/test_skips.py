@@ -6,14 +6,14 @@ import pytest
 
 from clsdcam import Settings, Solver
 from clsdcam.metrics import psnr, spectral_angle
-from clsdcam.phases import Phases
-from clsdcam.space_policy import CHECK_EVERY, WARMUP
+from clsdcam.solve.phases import Phases
+from clsdcam.solve.space_policy import CHECK_EVERY, WARMUP
 from clsdcam.sim import band_wavelengths, simulate
 from clsdcam.sim.kinds import make_kind
 from clsdcam.sim.scenes import FAINT_LINE
-from clsdcam.spaces import Spaces
-from clsdcam.subspace import SpectralSubspace
-from clsdcam.tracker import Tracker
+from clsdcam.solve.spaces import Spaces
+from clsdcam.solve.subspace import SpectralSubspace
+from clsdcam.solve.tracker import Tracker
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +95,8 @@ def test_a_late_entry_keeps_improving(monkeypatch):
     projected entry point can score an objective the subspace's iteration never reaches again, so it must not
     become the best iterate the checkpoints roll back to (before the fix: a rollback at every checkpoint and the
     PSNR frozen from iteration 100 on this scene)."""
-    monkeypatch.setattr("clsdcam.space_policy.ENTRY_TAIL", 0.02)     # a basis holding 98% of the lit spectra: 32 vectors
+    # a basis holding 98% of the lit spectra: 32 vectors
+    monkeypatch.setattr("clsdcam.solve.space_policy.ENTRY_TAIL", 0.02)
     sim = simulate(scene="target", shape=(96, 128), n_bands=64, seed=0)
     result = Solver(sim.calibration, settings=Settings(iters=150, subspace=True)).solve(sim.measurement,
                                                                                        snapshots=[100, 150])

@@ -142,12 +142,12 @@ def test_auto_is_numpy_here_and_gives_numpys_cube(scenes, tmp_path, capsys):
 def test_auto_chooses_an_opencl_gpu_and_says_which(scenes, tmp_path, monkeypatch, capsys):
     """With a GPU among the OpenCL devices, the default asks the solver for OpenCL (here the fake GPU is not
     built: the solver gets NumPy under that name)."""
-    import clsdcam.solver
+    import clsdcam.solve.solver
     from clsdcam.backends.numpy import NumpyBackend
 
     fake_opencl(monkeypatch, "CPU", "GPU")
     asked = []
-    monkeypatch.setattr(clsdcam.solver, "get_backend", lambda name, dtype, *rest: asked.append(name) or
+    monkeypatch.setattr(clsdcam.solve.solver, "get_backend", lambda name, dtype, *rest: asked.append(name) or
                         NumpyBackend(dtype))
     assert reconstruct(scenes, "small", "small", tmp_path / "c.h5", "--iters", "2", "--quiet") == 0
     assert "backend: opencl on Fake GPU (Fake OpenCL) (auto: a GPU was found)\n" in capsys.readouterr().out
@@ -157,13 +157,13 @@ def test_auto_chooses_an_opencl_gpu_and_says_which(scenes, tmp_path, monkeypatch
 def test_auto_gives_admm_the_gpu_and_numpy_to_an_algorithm_without_opencl(scenes, tmp_path, monkeypatch, capsys):
     """ADMM runs on OpenCL: ``--backend auto`` asks for the GPU as for FISTA. An algorithm whose ``backends`` leave
     OpenCL out (ADMM made so here) gets NumPy, said in one line, and solves."""
-    import clsdcam.solver
+    import clsdcam.solve.solver
     from clsdcam.algorithms.admm import Admm
     from clsdcam.backends.numpy import NumpyBackend
 
     fake_opencl(monkeypatch, "GPU")
     asked = []
-    monkeypatch.setattr(clsdcam.solver, "get_backend", lambda name, dtype, *rest: asked.append(name) or
+    monkeypatch.setattr(clsdcam.solve.solver, "get_backend", lambda name, dtype, *rest: asked.append(name) or
                         NumpyBackend(dtype))
     common = ("--iters", "3", "--algorithm", "admm", "--quiet")
     assert reconstruct(scenes, "small", "small", tmp_path / "gpu.h5", *common) == 0

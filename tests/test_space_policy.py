@@ -1,9 +1,9 @@
-"""The space policy (clsdcam.space_policy): pure decisions from host arrays to Stay / Enter / Move / Leave."""
+"""The space policy (clsdcam.solve.space_policy): pure decisions from host arrays to Stay / Enter / Move / Leave."""
 import numpy as np
 import pytest
 
-from clsdcam.space_policy import (ENTRY_TAIL, WIDEN_GAIN, Enter, Leave, Move, Stay, has_settled, on_check, on_entry,
-                                  read, subspace_allowed)
+from clsdcam.solve.space_policy import (ENTRY_TAIL, WIDEN_GAIN, Enter, Leave, Move, Stay, has_settled, on_check,
+                                        on_entry, read, subspace_allowed)
 
 K = 8
 

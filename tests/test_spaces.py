@@ -1,15 +1,15 @@
-"""The spaces a solve's iterates live in (clsdcam.spaces): band space is the full problem, a subspace is A·B with
+"""The spaces a solve's iterates live in (clsdcam.solve.spaces): band space is the full problem, a subspace is A·B with
 its own Lipschitz constant (remembered for the same basis), and the subspace's check takes one exact full step."""
 import numpy as np
 import pytest
 
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam import model as model_module
-from clsdcam.model import ForwardModel
-from clsdcam.priors import build_priors
-from clsdcam.settings import Settings
+from clsdcam.camera.model import ForwardModel
+from clsdcam.solve.priors import build_priors
+from clsdcam.solve.settings import Settings
 from clsdcam.sim import simulate
-from clsdcam.spaces import LastLipschitz, Spaces
+from clsdcam.solve.spaces import LastLipschitz, Spaces
 
 BACKEND = NumpyBackend("float64")
 
@@ -145,7 +145,7 @@ def test_fista_moves_to_a_basis_of_the_same_rank_in_its_own_arrays(spaces):
     """Onto a basis of the same rank the mapping keeps the shape, and FISTA writes the mapped iterates into its own
     four arrays (no new cubes), with the values of mapping each into a new one; onto a wider basis it takes new ones."""
     from clsdcam.algorithms.fista import Fista
-    from clsdcam.driver import Rules
+    from clsdcam.solve.driver import Rules
 
     basis = orthonormal(3, seed=14)
     first = spaces.subspace(basis)

@@ -1,13 +1,13 @@
-"""Where a solve starts (clsdcam.state.Start) and what it leaves to the next (SolverState): one plan object for
+"""Where a solve starts (clsdcam.solve.state.Start) and what it leaves to the next (SolverState): one plan object for
 cold, warm and carried starts."""
 import numpy as np
 
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.priors import build_priors
-from clsdcam.settings import Settings
+from clsdcam.solve.priors import build_priors
+from clsdcam.solve.settings import Settings
 from clsdcam.sim import simulate
-from clsdcam.solver import Solver
-from clsdcam.state import SolverState, Start
+from clsdcam.solve.solver import Solver
+from clsdcam.solve.state import SolverState, Start
 
 BACKEND = NumpyBackend("float32")
 

@@ -9,10 +9,10 @@ from clsdcam.batch import BatchSpec, run_batch
 from clsdcam.batch.motion import drift, moved_field, predict, predict_state, shifted
 from clsdcam.batch.parts import MAX_CHUNK, chunks
 from clsdcam.batch.spec import COLD_ITERS
-from clsdcam.calibration import Preprocessing, preprocess
+from clsdcam.camera.calibration import Preprocessing, preprocess
 from clsdcam.sim.video import simulate_video, write_video
-from clsdcam.solver import Settings, Solver
-from clsdcam.state import SolverState
+from clsdcam.solve.solver import Settings, Solver
+from clsdcam.solve.state import SolverState
 
 
 def smooth_cube(shape=(3, 48, 64), seed=0):

@@ -228,7 +228,7 @@ def test_the_projected_risk_of_a_row_space_error_is_its_whole_norm():
     """P = Aᵀ(AAᵀ)⁻¹A keeps what lies in A's row space: for e = Aᵀw, eᵀPe = ‖e‖² (conjugate gradients on AAᵀ,
     192 unknowns, 300 steps: within 1e-4, where the residual stalls at 1e-5); a random error keeps far less."""
     from clsdcam.backends.numpy import NumpyBackend
-    from clsdcam.model import ForwardModel
+    from clsdcam.camera.model import ForwardModel
     from clsdcam.sim import simulate
 
     sim = simulate(scene="leds", shape=(12, 16), n_bands=4, seed=3)

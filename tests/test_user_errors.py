@@ -272,6 +272,6 @@ def test_one_non_finite_value_is_singular(sim, tmp_path, capsys):
 
 def test_dir_lists_the_public_api_without_importing_it():
     code = ("import sys, clsdcam; names = dir(clsdcam); "
-            "print(all(n in names for n in clsdcam.__all__), 'clsdcam.solver' in sys.modules)")
+            "print(all(n in names for n in clsdcam.__all__), 'clsdcam.solve.solver' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["True", "False"]

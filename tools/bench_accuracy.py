@@ -30,7 +30,7 @@ from clsdcam.cli.options import size
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.sim import noiseless_measurement, shared_data_dir, simulate
 from clsdcam.sim.scenes import source_lines, source_positions
-from clsdcam.solver import Settings, Solver
+from clsdcam.solve.solver import Settings, Solver
 
 SCENES = ("target", "leds", "piecewise", "realcube", "sources", "lines")
 CONFIGS = {"default": {}, "--no-skip": {"skip": False}}
@@ -131,7 +131,7 @@ def binned(path: Path) -> np.ndarray:
 def run_hand(marks, sweep, reference_iters: int, reference_tv: float, out: Path, algorithms=()) -> dict | None:
     """The hand (K = 1): correlation of each run's image with a long ``--no-skip`` run at ``reference_tv``;
     ``hand_<run>.png``: each run's image after the last mark, and the reference's."""
-    from clsdcam.calibration import Calibration
+    from clsdcam.camera.calibration import Calibration
 
     paths = [shared_data_dir() / relative for relative in HAND]
     if not all(p.exists() for p in paths):

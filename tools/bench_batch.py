@@ -27,10 +27,10 @@ import numpy as np
 from clsdcam.batch import BatchSpec, run_batch
 from clsdcam.batch.spec import COLD_ITERS
 from clsdcam.batch.stream import Carried, next_solve
-from clsdcam.calibration import Preprocessing, preprocess
+from clsdcam.camera.calibration import Preprocessing, preprocess
 from clsdcam.metrics import psnr
 from clsdcam.sim.video import simulate_video, write_video
-from clsdcam.solver import Settings, Solver
+from clsdcam.solve.solver import Settings, Solver
 
 
 def throughput(args, workdir: Path) -> dict:

@@ -50,19 +50,19 @@ from bench_iteration import floor_timer  # noqa: E402
 
 from clsdcam.algorithms.admm import Admm  # noqa: E402
 from clsdcam.algorithms.fista import Fista  # noqa: E402
-from clsdcam.auto_weights import AutoWeights  # noqa: E402
+from clsdcam.solve.auto_weights import AutoWeights  # noqa: E402
 from clsdcam.backends import fft as device_fft  # noqa: E402
-from clsdcam.checkpoints import Checkpoints  # noqa: E402
-from clsdcam.model import ForwardModel  # noqa: E402
-from clsdcam.phases import Phases  # noqa: E402
-from clsdcam.priors import ProxAverage  # noqa: E402
-from clsdcam.problem import Problem  # noqa: E402
+from clsdcam.solve.checkpoints import Checkpoints  # noqa: E402
+from clsdcam.camera.model import ForwardModel  # noqa: E402
+from clsdcam.solve.phases import Phases  # noqa: E402
+from clsdcam.solve.priors import ProxAverage  # noqa: E402
+from clsdcam.solve.problem import Problem  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
-from clsdcam.solver import Settings, Solver  # noqa: E402
+from clsdcam.solve.solver import Settings, Solver  # noqa: E402
 from clsdcam.algorithms.admm import algorithm as admm_algorithm  # noqa: E402
 from clsdcam.algorithms.admm.host_steps import Splitting  # noqa: E402
 from clsdcam.algorithms.admm.terms import SplittingBase  # noqa: E402
-from clsdcam.subspace import SpectralSubspace  # noqa: E402
+from clsdcam.solve.subspace import SpectralSubspace  # noqa: E402
 
 TRANSFORMS = "transforms"
 FILTERS = "filter mix, pad and crop"

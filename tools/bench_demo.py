@@ -19,7 +19,7 @@ from clsdcam.cli.options import size
 from clsdcam.metrics import bar_detail, psnr, spectral_angle
 from clsdcam.sim import simulate
 from clsdcam.sim.scenes import in_window, inner_shape, quadrant_masks
-from clsdcam.solver import Settings, Solver
+from clsdcam.solve.solver import Settings, Solver
 
 CONFIGS = {"fista": {}, "fista --no-skip": {"skip": False}, "admm": {"algorithm": "admm"}}
 QUADRANTS = ("red", "green", "blue", "white")

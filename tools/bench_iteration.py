@@ -30,9 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from authors_baseline import AuthorsSolver  # noqa: E402
 
 from clsdcam.backends.host_convolution import CHUNK_BYTES  # noqa: E402
-from clsdcam.space_policy import WARMUP  # noqa: E402
+from clsdcam.solve.space_policy import WARMUP  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
-from clsdcam.solver import Settings, Solver  # noqa: E402
+from clsdcam.solve.solver import Settings, Solver  # noqa: E402
 
 WINDOW = 50     # steady-state iterations timed per solve: 5 objective checks and, in a subspace, 2 basis checks
 AUTHORS = "authors (complex128, as published)"

@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from clsdcam.backends.cases import Inputs, benchmarks  # noqa: E402
 from clsdcam.backends.numpy import NumpyBackend  # noqa: E402
-from clsdcam.model import ForwardModel  # noqa: E402
+from clsdcam.camera.model import ForwardModel  # noqa: E402
 
 
 def parse_args(argv=None):
@@ -97,10 +97,10 @@ def iteration(be, model, p: Bench):
     """One iteration of the solver's loop (the driver running FISTA) on its band-space problem (TV prox, no
     objective checks)."""
     from clsdcam.algorithms.fista import Fista
-    from clsdcam.driver import Driver, Rules
-    from clsdcam.priors import ProxAverage, TotalVariation
-    from clsdcam.problem import Problem
-    from clsdcam.settings import Settings
+    from clsdcam.solve.driver import Driver, Rules
+    from clsdcam.solve.priors import ProxAverage, TotalVariation
+    from clsdcam.solve.problem import Problem
+    from clsdcam.solve.settings import Settings
 
     average = ProxAverage(be, [TotalVariation(be, 1e-3, Settings())], model.cube_shape)
     problem = Problem(model, be.to_device(np.ones(p.sensor)), average.prox, average.value, p.bands)

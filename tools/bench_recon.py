@@ -39,7 +39,7 @@ from authors_baseline import AuthorsReplay, AuthorsSolver  # noqa: E402
 
 from clsdcam.metrics import psnr, relative_error, spectral_angle  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
-from clsdcam.solver import Settings, Solver  # noqa: E402
+from clsdcam.solve.solver import Settings, Solver  # noqa: E402
 
 CONFIGS = {  # name -> (backend, Settings fields)
     "numpy": ("numpy", {}),

@@ -37,7 +37,7 @@ def digest(result) -> dict:
 
 def solve_scene(scene, shape, bands, iters, configs, cubes, meta, tag):
     from clsdcam.sim import simulate
-    from clsdcam.solver import Settings, Solver
+    from clsdcam.solve.solver import Settings, Solver
 
     sim = simulate(scene=scene, shape=shape, n_bands=bands, seed=0)
     for name in configs:
@@ -49,10 +49,10 @@ def solve_scene(scene, shape, bands, iters, configs, cubes, meta, tag):
 
 def solve_stream(shape, bands, frames, iters, cubes, meta):
     from clsdcam.batch.stream import Carried, next_solve
-    from clsdcam.calibration import Preprocessing, preprocess
+    from clsdcam.camera.calibration import Preprocessing, preprocess
     from clsdcam.batch.spec import COLD_ITERS
     from clsdcam.sim.video import simulate_video
-    from clsdcam.solver import Settings, Solver
+    from clsdcam.solve.solver import Settings, Solver
 
     calibration, video, _ = simulate_video("leds", frames, shape, bands, seed=0, drift=(0.3, 0.6))
     calibration, _ = preprocess(calibration, video[0], Preprocessing())

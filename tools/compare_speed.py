@@ -29,7 +29,7 @@ HERE = Path(__file__).resolve().parent.parent
 def solve_seconds(args) -> float:
     """The child: one solve of the simulated scene, its seconds."""
     from clsdcam.sim import simulate
-    from clsdcam.solver import Settings, Solver
+    from clsdcam.solve.solver import Settings, Solver
 
     shape = tuple(int(v) for v in args.size.split("x"))
     sim = simulate(scene=args.scene, shape=shape, n_bands=args.bands, seed=args.seed)

@@ -6,7 +6,7 @@
 For each scene, the default solver runs in band space only (``--rank K``: its warm-up continued, same skips and
 weights; the iterate is ``--subspace``'s own until it enters its subspace, at a settle check from
 iteration 20 on), and at each iteration of ``--at`` the lit unit spectra of the iterate's sensor window give the
-Gram eigenvalues e_1 ≥ e_2 ≥ … ≥ 0, Σ e_j = 1 (:class:`clsdcam.subspace.Spectra`). Printed beside each other:
+Gram eigenvalues e_1 ≥ e_2 ≥ … ≥ 0, Σ e_j = 1 (:class:`clsdcam.solve.subspace.Spectra`). Printed beside each other:
 
 * the automatic rule's entry rank, the fewest directions leaving a mean sin² of at most ``ENTRY_TAIL`` outside;
 * the two largest eigenvalue gaps, ratio_j = e_j / max(e_{j+1}, ROUND_OFF) for j ≤ K/2 with e_j > ROUND_OFF (so a
@@ -28,10 +28,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_accuracy import panel_parser, report, save_json, size_text  # noqa: E402  (the panel's scenes and options)
 
-from clsdcam.space_policy import ENTRY_TAIL, MAX_RANK_FRACTION  # noqa: E402
+from clsdcam.solve.space_policy import ENTRY_TAIL, MAX_RANK_FRACTION  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
-from clsdcam.solver import Settings, Solver  # noqa: E402
-from clsdcam.subspace import Spectra, lit_shapes  # noqa: E402
+from clsdcam.solve.solver import Settings, Solver  # noqa: E402
+from clsdcam.solve.subspace import Spectra, lit_shapes  # noqa: E402
 
 ROUND_OFF = 1e-12
 

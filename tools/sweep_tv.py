@@ -12,7 +12,7 @@ import time
 
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.sim import simulate
-from clsdcam.solver import Settings, Solver
+from clsdcam.solve.solver import Settings, Solver
 
 MARKS = (50, 100, 200, 300, 500, 1000)
 

@@ -29,9 +29,9 @@ from bench_accuracy import panel_parser, save_json
 from bench_panel import panel_kinds, panel_scene, scene_plan, sweep_weights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.metrics import psnr, spectral_angle
-from clsdcam.model import ForwardModel
-from clsdcam.auto_weights import AUTO_AT
-from clsdcam.solver import Settings, Solver
+from clsdcam.camera.model import ForwardModel
+from clsdcam.solve.auto_weights import AUTO_AT
+from clsdcam.solve.solver import Settings, Solver
 
 CG_TOL = 1e-8        # relative residual at which the conjugate gradients stop early
 SCORES = {"psnr": max, "angle": min, "predicted": min, "projected": min}   # each score's best

@@ -1,7 +1,7 @@
-"""What an algorithm is to the driver (:mod:`clsdcam.driver`): one iteration at a time on a problem, and its own
+"""What an algorithm is to the driver (:mod:`clsdcam.solve.driver`): one iteration at a time on a problem, and its own
 iterates; every algorithm subclasses :class:`Algorithm`, whose class attributes say what it can do.
 
-An algorithm minimises F(x) = f(x) + g(x) for a problem (:class:`clsdcam.problem.Problem`) that offers
+An algorithm minimises F(x) = f(x) + g(x) for a problem (:class:`clsdcam.solve.problem.Problem`) that offers
 
     problem.gradient_step(y, out, step) -> f(y)      out = y − step·∇f(y)
     problem.prox(z, step, out)                        out = prox_{step·g}(z)
@@ -20,9 +20,10 @@ once there). To the driver an algorithm is:
 * ``reset(point)``: every iterate to ``point``, any momentum afresh (the checkpoints' rollback);
 * ``move(mapping)``: every iterate through ``mapping`` (a change of space, e.g. onto a spectral basis), any
   momentum kept. A mapping with ``keeps_shape`` true also takes ``out=``, an array of the iterates' shape other
-  than its input, to write into (``clsdcam.spaces.BandMixing``).
+  than its input, to write into (``clsdcam.solve.spaces.BandMixing``).
 
-A constructor ``(backend, x0, step, rules)`` copies x0 into its iterates (``rules``: :class:`clsdcam.driver.Rules`).
+A constructor ``(backend, x0, step, rules)`` copies x0 into its iterates (``rules``:
+:class:`clsdcam.solve.driver.Rules`).
 A new algorithm is one module (or one folder, with its sub-problems) and one line in
 :data:`clsdcam.algorithms.ALGORITHMS`.
 """
@@ -71,7 +72,7 @@ class Algorithm:
         raise InputError(f"--algorithm {self.name} runs in band space: no --subspace or --rank")
 
     def carry(self):
-        """What a video's next frame resumes from besides its iterate (:class:`clsdcam.state.SolverState`), or
+        """What a video's next frame resumes from besides its iterate (:class:`clsdcam.solve.state.SolverState`), or
         None: an algorithm with more state than its iterates (ADMM's splits and duals) returns it."""
         return None
 

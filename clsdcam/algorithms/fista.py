@@ -1,4 +1,4 @@
-"""FISTA (Beck & Teboulle 2009) as one step object; the driver (:mod:`clsdcam.driver`) runs it. With step s:
+"""FISTA (Beck & Teboulle 2009) as one step object; the driver (:mod:`clsdcam.solve.driver`) runs it. With step s:
 
     z   = y − s·∇f(y)                       (problem.gradient_step)
     x⁺  = prox_{s·g}(z)                     (problem.prox)

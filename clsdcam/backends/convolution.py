@@ -1,7 +1,7 @@
 """A's filtered convolution, the operator each backend's ``convolution`` returns (``base.Convolution``).
 
 With Ĥ the transfer function with the sensor window at the FFT origin
-(:func:`clsdcam.geometry.transfer_function`), F_k the filters and (H, W) the sensor:
+(:func:`clsdcam.camera.geometry.transfer_function`), F_k the filters and (H, W) the sensor:
 
     forward:   b = Σ_k F_k ⊙ [irfft2(Ĥ · rfft2(v_k))]_{0:H, 0:W}
     adjoint:   (Aᵀr)_k = irfft2(conj(Ĥ) · rfft2(pad₀(F_k ⊙ r)))

@@ -63,7 +63,7 @@ def predict(before, previous, min_shift: float = MIN_SHIFT):
 
 
 def predict_state(before, previous, state, backend, min_shift: float = MIN_SHIFT):
-    """A solver state (:class:`clsdcam.state.SolverState`) for frame i: frame i−1's, its whole field moved by
+    """A solver state (:class:`clsdcam.solve.state.SolverState`) for frame i: frame i−1's, its whole field moved by
     the drift between the cubes x̂_{i−2} (``before``) and x̂_{i−1} (``previous``), without the algorithm's carry
     (ADMM's duals belong to the unmoved field); as it is when the drift is unknown or under ``min_shift`` px."""
     d = significant_drift(before, previous, min_shift)

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..calibration import Preprocessing
+from ..camera.calibration import Preprocessing
 from ..errors import InputError
-from ..settings import COLD_ITERS, Settings
+from ..solve.settings import COLD_ITERS, Settings
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 
 Stream. Frames [s, e) are one stream on one solver. The first frame (and any frame after a failed
 one) is a cold start with the cold budget (``BatchSpec.budget``); every later frame is warm: it starts
-from the previous frame's solver state (:mod:`clsdcam.state`: the whole field, the spectral basis and
+from the previous frame's solver state (:mod:`clsdcam.solve.state`: the whole field, the spectral basis and
 rank if it ended in a subspace, the step, the prior weights: no band-space warm-up, no new weight estimate), its field moved by
 the drift seen between x̂_{i−2} and x̂_{i−1} (:func:`clsdcam.batch.motion.predict_state`), and runs
 ``settings.iters`` iterations. Frame i+1 is read by a reader thread and cube i−1 written by a writer
@@ -34,10 +34,10 @@ from typing import Any
 import numpy as np
 
 from ..calibrate.measurement import raw_steps
-from ..calibration import Calibration, Preprocessing, preprocess
+from ..camera.calibration import Calibration, Preprocessing, preprocess
 from ..errors import InputError
 from ..io import atomic_output
-from ..solver import Settings, Solver
+from ..solve.solver import Settings, Solver
 from .frames import FrameSource
 from .motion import predict_state
 from .parts import read_records, write_columns, write_cube

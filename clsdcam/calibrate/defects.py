@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..raw import RawSteps, bin_pixels, crop_frame
+from ..camera.raw import RawSteps, bin_pixels, crop_frame
 
 DEAD_FRACTION = 0.02
 HOT_FLOOR = 0.5

@@ -23,7 +23,7 @@ from .bands import band_centres, check_edges, integrate_bands
 from .dark import resolve_dark
 from .defects import Defects, find_defects
 from .frames import open_sweep
-from ..raw import RawSteps, shift_image
+from ..camera.raw import RawSteps, shift_image
 from .sweep import exposure_weights, measure, power_weights, sweep_wavelengths
 
 
@@ -70,7 +70,7 @@ def calibrate_filters(sweep, wavelengths: str, edges: np.ndarray, power=None, ex
 def with_psf(result: FilterCalibration, psf_calibration, source: str):
     """A complete calibration: the PSF (and its raw steps) of ``psf_calibration`` with these filters, moved by
     the PSF's centring shift; InputError when the sizes or the spatial steps differ."""
-    from ..calibration import Calibration
+    from ..camera.calibration import Calibration
 
     psf, raw = psf_calibration.psf, psf_calibration.raw
     if psf.shape != result.filters.shape[1:]:

@@ -1,7 +1,7 @@
 """A measurement's own raw steps: frames averaged, a dark removed, pixels binned (``clsdcam reconstruct
 MEASUREMENT… --average N --dark FILE…|LEVEL --bin N``; in Python :func:`prepare` (``clsdcam.prepare``) with a list
 of files and ``Preprocessing(dark=…, bin=…)``): the same path for both, which ends in the calibration's
-preprocessing (:func:`clsdcam.calibration.preprocess`).
+preprocessing (:func:`clsdcam.camera.calibration.preprocess`).
 
 1. frames: b = (1/n) Σ_i frame_i over the n files given (``--average N``: the first N);
 2. then the steps of :mod:`.raw` on b:
@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..calibration import Calibration, Preprocessing, preprocess
+from ..camera.calibration import Calibration, Preprocessing, preprocess
 from ..errors import InputError, shape_text
-from ..raw import RawSteps, apply_raw_steps
+from ..camera.raw import RawSteps, apply_raw_steps
 from .dark import resolve_dark
 from .frames import average_frames
 

@@ -4,7 +4,7 @@ h = the mean of the frames, then the raw steps of :mod:`.raw` (dark, clipped at 
 ``center``, the shift s = round(c − m) that moves the centroid m = Σ_p p·h(p) / Σ_p h(p) onto the frame centre
 c = (H//2, W//2) (the PSF origin of docs/conventions.md; whole pixels, zero fill), and finally h / ‖h‖₂.
 The report gives the brightest pixel and the centroid against c, and the support of the normalised PSF
-(:func:`clsdcam.geometry.psf_support`: the box holding all but 1e-4 of its L1 mass, as offsets from c).
+(:func:`clsdcam.camera.geometry.psf_support`: the box holding all but 1e-4 of its L1 mass, as offsets from c).
 """
 from __future__ import annotations
 
@@ -13,10 +13,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import InputError, shape_text
-from ..geometry import psf_centre, psf_support
+from ..camera.geometry import psf_centre, psf_support
 from .dark import resolve_dark
 from .frames import average_frames
-from ..raw import RawSteps, apply_raw_steps, shift_image
+from ..camera.raw import RawSteps, apply_raw_steps, shift_image
 
 @dataclass(frozen=True, eq=False)
 class PsfCalibration:
@@ -70,6 +70,6 @@ def report_lines(result: PsfCalibration) -> list[str]:
 
 def one_band(result: PsfCalibration, wavelength: float, source: str):
     """A complete one-band calibration (plain DiffuserCam: filters all ones (1, H, W)) with the raw steps."""
-    from ..calibration import Calibration
+    from ..camera.calibration import Calibration
 
     return Calibration(result.psf, np.ones((1,) + result.psf.shape), [wavelength], source=source, raw=result.steps)

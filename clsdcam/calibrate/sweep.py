@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import InputError, shape_text
 from .frames import Sweep
-from ..raw import RawSteps, apply_raw_steps
+from ..camera.raw import RawSteps, apply_raw_steps
 from .tables import interpolated, read_table
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from ..prototype import N_BANDS, SENSOR_SHAPE
+from ..camera.prototype import N_BANDS, SENSOR_SHAPE
 from .options import DATA_OPTION, examples, integer_at_least, size
 
 ANALYSES = ("resolution", "condition", "designs", "spectral", "twopoint")

@@ -15,7 +15,7 @@ EXAMPLES = examples(
 
 
 def add_parser(subparsers):
-    from ..settings import COLD_ITERS, DEFAULT_ITERS
+    from ..solve.settings import COLD_ITERS, DEFAULT_ITERS
 
     p = subparsers.add_parser("batch", help="reconstruct many frames (warm-started streams on Dask workers)",
                               description="Reconstruct many frames: warm-started streams, on Dask workers; a "

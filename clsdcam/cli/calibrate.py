@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..prototype import N_BANDS, SPECTRAL_RANGE
+from ..camera.prototype import N_BANDS, SPECTRAL_RANGE
 from .options import examples, number, positive_int
 
 PSF_EXAMPLES = (
@@ -96,7 +96,7 @@ def run(args) -> int:
 def _checked(args, pictures):
     """Output paths checked before any work; the --crop window."""
     from ..calibrate.pictures import picture_paths
-    from ..calibration import parse_crop
+    from ..camera.calibration import parse_crop
     from ..io import check_output
 
     check_output(args.output)
@@ -124,7 +124,7 @@ def _run_filters(args) -> int:
     from ..calibrate.bands import edges_from_csv, equal_edges
     from ..calibrate.filters import calibrate_filters, save_filters_only, with_psf
     from ..calibrate.pictures import save_filter_pictures
-    from ..calibration import Calibration
+    from ..camera.calibration import Calibration
 
     crop = _checked(args, ("peak_wavelength", "transmission"))
     psf = Calibration.load(args.psf) if args.psf else None

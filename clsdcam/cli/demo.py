@@ -65,8 +65,8 @@ def run(args) -> int:
 
 def fill_defaults(args):
     """--size and --iters where not given: the prototype's sensor and the solver's default, or QUICK's."""
-    from ..prototype import SENSOR_SHAPE
-    from ..settings import DEFAULT_ITERS
+    from ..camera.prototype import SENSOR_SHAPE
+    from ..solve.settings import DEFAULT_ITERS
 
     for name, value in (QUICK if args.quick else {"size": SENSOR_SHAPE, "iters": DEFAULT_ITERS}).items():
         if getattr(args, name) is None:

@@ -1,8 +1,8 @@
 """The command line's parser: argument types, the option groups commands share, and ``build_parser``
 (one sub-command per module of :mod:`clsdcam.cli` but the helpers: a new command is a new module).
 
-Building the parser imports only this package's command modules, ``clsdcam.settings`` (with the prior
-table that generates one ``--flag`` per prior) and ``clsdcam.prototype``: every heavy import (SciPy, h5py,
+Building the parser imports only this package's command modules, ``clsdcam.solve.settings`` (with the prior
+table that generates one ``--flag`` per prior) and ``clsdcam.camera.prototype``: every heavy import (SciPy, h5py,
 the solver, the simulator) waits inside a command's ``run``. A usage error is an InputError: one line,
 exit 2.
 """
@@ -157,8 +157,8 @@ def add_backend_options(p: argparse.ArgumentParser):
 def add_solver_options(p: argparse.ArgumentParser):
     """The solver's options: iterations, one weight per prior of the table, stopping rules, skips, backend."""
     from ..algorithms import ALGORITHMS
-    from ..priors import PRIORS
-    from ..settings import DEFAULT_ITERS
+    from ..solve.priors import PRIORS
+    from ..solve.settings import DEFAULT_ITERS
 
     p.add_argument("--iters", type=positive_int, default=DEFAULT_ITERS, help=f"iterations (default {DEFAULT_ITERS})")
     p.add_argument("--algorithm", default="fista", choices=tuple(ALGORITHMS),
@@ -219,7 +219,7 @@ def add_measurement_options(p: argparse.ArgumentParser, average: bool = True):
 
 def add_simulation_options(p: argparse.ArgumentParser):
     """The simulated camera and scene: scene, seed, noise, size, bands, and the shared data folder (``realcube``)."""
-    from ..prototype import N_BANDS, SENSOR_SHAPE
+    from ..camera.prototype import N_BANDS, SENSOR_SHAPE
 
     p.add_argument("--scene", default="target", choices=SCENES, metavar="SCENE",
                    help=f"{', '.join(SCENES)} (default target)")
@@ -260,8 +260,8 @@ def command_module(name: str):
 # ---- options -> objects ---------------------------------------------------------------------------------
 def settings_from(args):
     """Solver settings from the command-line options (every prior's weight by its table name)."""
-    from ..priors import PRIORS
-    from ..settings import Settings
+    from ..solve.priors import PRIORS
+    from ..solve.settings import Settings
 
     return Settings(iters=args.iters, algorithm=args.algorithm, tv_weights=args.tv_weights, tol=args.tol, plateau=args.plateau, rank=args.rank,
                     subspace=args.subspace, support_field=args.support_field, skip=not args.no_skip, dtype=args.dtype,
@@ -271,7 +271,7 @@ def settings_from(args):
 
 def preprocessing_from(args):
     """The preprocessing steps the options ask for (``--reference-preprocess`` as the base)."""
-    from ..calibration import Preprocessing, parse_crop
+    from ..camera.calibration import Preprocessing, parse_crop
 
     base = Preprocessing.reference() if args.reference_preprocess else Preprocessing()
     crop = parse_crop(args.crop) if args.crop else base.crop
@@ -302,7 +302,7 @@ def _dead_pixels(path, crop):
     """The --dead-pixels mask, cropped like the measurement."""
     if path is None:
         return None
-    from ..calibration import PixelMask
+    from ..camera.calibration import PixelMask
     from ..io import load_measurement
 
     mask = load_measurement(path)

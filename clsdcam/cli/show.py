@@ -89,7 +89,7 @@ def find_inputs(args, attrs: dict):
     ``--measurement`` / ``--calibration``, else from the paths the cube records (``measurement_path`` or a batch's
     ``frames_path``, ``calibration_path``), each found as recorded or by its name beside the cube. A given file
     that cannot be read is an InputError; a recorded one that is missing or unreadable is left out, with a note."""
-    from ..calibration import Calibration
+    from ..camera.calibration import Calibration
     from ..input_pictures import Inputs
 
     def calibration(paths):

@@ -13,7 +13,7 @@ from .options import settings_from
 
 def solve(args, calibration, measurement, snapshots=()):
     """Build the solver and run it with a progress bar; Ctrl-C without --save-on-interrupt propagates."""
-    from ..solver import Solver
+    from ..solve.solver import Solver
 
     solver = Solver(calibration, backend=chosen_backend(args), device=args.device, settings=settings_from(args),
                     fft=args.fft, path=args.path)

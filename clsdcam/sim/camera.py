@@ -7,7 +7,7 @@ window gives the measurement
 
     b = Σ_k F_k ⊙ crop(h ∗ v_k) + noise,
 
-computed with :class:`clsdcam.model.ForwardModel` (PSF origin at its centre pixel); the noise
+computed with :class:`clsdcam.camera.model.ForwardModel` (PSF origin at its centre pixel); the noise
 is shot noise then Gaussian read noise (:func:`add_noise`). Filter responses are sampled at
 the band wavelengths, F_k = T(λ_k). Every random choice is seeded; the same arguments give
 the same arrays.
@@ -21,10 +21,10 @@ import h5py
 import numpy as np
 
 from ..backends import NumpyBackend
-from ..calibration import Calibration
+from ..camera.calibration import Calibration
 from ..errors import InputError
 from ..io import atomic_output, save_measurement
-from ..model import ForwardModel
+from ..camera.model import ForwardModel
 from .caustic import caustic_psf
 from .filters import filter_array
 from .scenes import make_scene

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..prototype import SENSOR_SHAPE as DEFAULT_SHAPE  # noqa: F401 - the simulator's default sensor
+from ..camera.prototype import SENSOR_SHAPE as DEFAULT_SHAPE  # noqa: F401 - the simulator's default sensor
 
 
 def ray_grid(shape, oversample: int):

@@ -12,8 +12,8 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError
-from ..prototype import N_BANDS as DEFAULT_BANDS
-from ..prototype import SPECTRAL_RANGE
+from ..camera.prototype import N_BANDS as DEFAULT_BANDS
+from ..camera.prototype import SPECTRAL_RANGE
 
 
 def band_wavelengths(n_bands: int = DEFAULT_BANDS, lo: float = SPECTRAL_RANGE[0],

@@ -32,10 +32,10 @@ from pathlib import Path
 import numpy as np
 
 from ..calibrate.bands import equal_edges, integrate_bands
-from ..calibration import Calibration
+from ..camera.calibration import Calibration
 from ..data import missing_text, shared_data_dir
 from ..io import atomic_output
-from ..prototype import SPECTRAL_RANGE
+from ..camera.prototype import SPECTRAL_RANGE
 from .camera import Simulation, resolve_geometry, simulate, write_simulation
 from .filters import filter_array
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import scipy.ndimage as ndi
 
-from ..calibration import Calibration
+from ..camera.calibration import Calibration
 from ..io import atomic_output
 from .camera import add_noise, noiseless_measurement
 from .caustic import caustic_psf

@@ -12,11 +12,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from clsdcam.calibration import Calibration
+from clsdcam.camera.calibration import Calibration
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr
 from clsdcam.sim import simulate
-from clsdcam.solver import Settings, Solver
+from clsdcam.solve.solver import Settings, Solver
 
 SHAPE, BANDS = (24, 32), 4
 

@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from clsdcam.calibration import Calibration
+from clsdcam.camera.calibration import Calibration
 from clsdcam.cli import main
 from clsdcam.errors import InputError
 from clsdcam.io import load_measurement

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 from ...backends.base import Programs
 from ...errors import InputError
-from ...priors import Sparsity, TotalVariation
+from ...solve.priors import Sparsity, TotalVariation
 from ..base import Algorithm, ratio
 
 if TYPE_CHECKING:                 # the parser lists the algorithms: the steps' SciPy is imported when one solves

@@ -7,7 +7,7 @@ from dataclasses import astuple, dataclass
 
 import numpy as np
 
-from ...geometry import transfer_function
+from ...camera.geometry import transfer_function
 
 TERMS_KEY = "admm calibration terms"     # the solver's shared store keeps the CalibrationTerms under this name
 
@@ -97,9 +97,10 @@ class CalibrationTerms:
 
 class SplittingBase:
     """What ADMM's steps share on every backend: the problem's shapes and scales, and the penalties with what depends
-    on them. ``model``: the band space's :class:`~clsdcam.model.ForwardModel`; ``terms`` its
-    :class:`CalibrationTerms`; ``tv`` the :class:`~clsdcam.priors.TotalVariation` prior or None, ``l1`` the
-    :class:`~clsdcam.priors.Sparsity` prior or None (their weights are read at every step: an automatic weight chosen
+    on them. ``model``: the band space's :class:`~clsdcam.camera.model.ForwardModel`; ``terms`` its
+    :class:`CalibrationTerms`; ``tv`` the :class:`~clsdcam.solve.priors.TotalVariation` prior or None, ``l1`` the
+    :class:`~clsdcam.solve.priors.Sparsity` prior or None (their weights are read at every step: an automatic weight
+    chosen
     mid-solve takes effect at once). A backend's steps (:class:`Splitting` on NumPy,
     :class:`~clsdcam.algorithms.admm.kernel_steps.KernelSplitting` with programs) add ``start``, ``c_step`` and ``splits``."""
 

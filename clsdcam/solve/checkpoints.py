@@ -1,4 +1,4 @@
-"""Safeguards any algorithm runs under (:mod:`clsdcam.driver`), each recorded in the history:
+"""Safeguards any algorithm runs under (:mod:`clsdcam.solve.driver`), each recorded in the history:
 
 * monotone checkpoints (as MFISTA): every ``objective_every`` iterations F(x) is evaluated; the best iterate is
   kept, and a rise (beyond round-off, 64·eps·|F|) sends the algorithm back to it (``reset``: momentum afresh),
@@ -19,7 +19,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .algorithms.base import place
+from ..algorithms.base import place
 
 MAX_BACKOFFS = 40   # 2⁻⁴⁰: a step that still diverges after this is not a step-size problem
 BLOWUP = 1e3       # f(y) above BLOWUP·F(best) is divergence, not momentum overshoot

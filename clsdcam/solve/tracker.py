@@ -6,7 +6,7 @@ from typing import Callable
 
 import numpy as np
 
-from .geometry import centred_geometry
+from ..camera.geometry import centred_geometry
 from .problem import Problem
 from .skips import SkipReport
 from .units import Units
@@ -16,7 +16,7 @@ class Tracker:
     """Per-iteration bookkeeping: data units, rank and FFTs of each iteration, snapshots, progress, FFT work."""
 
     def __init__(self, model, units: Units, snapshots=(), progress: Callable[[dict], None] | None = None):
-        """``units``: the solve's :class:`~clsdcam.units.Units` (snapshots and progress leave in data units)."""
+        """``units``: the solve's :class:`~clsdcam.solve.units.Units` (snapshots and progress leave in data units)."""
         self.model = model
         self.units = units
         self.snapshots = set(snapshots)

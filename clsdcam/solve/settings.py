@@ -1,7 +1,7 @@
-"""Solver settings: the loop's and the skips' fields, plus one weight per prior of :data:`clsdcam.priors.PRIORS`
+"""Solver settings: the loop's and the skips' fields, plus one weight per prior of :data:`clsdcam.solve.priors.PRIORS`
 (generated from the table, so a new prior is a field and a ``--flag`` without touching this file).
 
-Weights are relative to the data (see :mod:`clsdcam.priors`). Every value is checked on construction
+Weights are relative to the data (see :mod:`clsdcam.solve.priors`). Every value is checked on construction
 (an :class:`~clsdcam.errors.InputError` naming the option).
 """
 from __future__ import annotations
@@ -11,8 +11,8 @@ from dataclasses import dataclass, field, make_dataclass
 
 import numpy as np
 
-from .algorithms import ALGORITHMS
-from .errors import InputError
+from ..algorithms import ALGORITHMS
+from ..errors import InputError
 from .priors import AUTO, PRIORS
 
 DEFAULT_ITERS = 300
@@ -76,7 +76,7 @@ class SolverSettings:
 Settings = make_dataclass(
     "Settings", [(row.name, float | str, field(default=row.default)) for row in PRIORS], bases=(SolverSettings,),
     frozen=True, namespace={"__doc__": "Solver settings: SolverSettings' fields and one relative weight per prior "
-                                       "(clsdcam.priors.PRIORS: " + ", ".join(row.name for row in PRIORS) + ").",
+                                       "(clsdcam.solve.priors.PRIORS: " + ", ".join(row.name for row in PRIORS) + ").",
                                        "__module__": __name__})
 
 

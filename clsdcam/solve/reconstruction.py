@@ -1,10 +1,11 @@
-"""One solve: a :class:`Reconstruction` is built from a :class:`~clsdcam.solver.Solver` (one calibration on one
+"""One solve: a :class:`Reconstruction` is built from a :class:`~clsdcam.solve.solver.Solver` (one calibration on one
 backend) and one measurement, and owns everything that lives for that solve alone (SigPy's ``App``):
 
-* b / s on the device, with s = max|b|, and the solve's :class:`~clsdcam.units.Units` (every conversion between
+* b / s on the device, with s = max|b|, and the solve's :class:`~clsdcam.solve.units.Units` (every conversion between
   solver and data units, for the cube, its snapshots, the history and the carried state);
-* its start (:mod:`clsdcam.state`), priors, spaces (:mod:`clsdcam.spaces`), algorithm, driver, tracker and phases;
-* the :class:`~clsdcam.result.Result` it hands back.
+* its start (:mod:`clsdcam.solve.state`), priors, spaces (:mod:`clsdcam.solve.spaces`), algorithm, driver, tracker
+and phases;
+* the :class:`~clsdcam.solve.result.Result` it hands back.
 
 The solver keeps only what serves every solve of its calibration: the model, its Lipschitz constant, the last
 subspace's L and the shared store algorithms build their calibration terms in.
@@ -16,11 +17,11 @@ from typing import Callable
 
 import numpy as np
 
-from . import __version__
-from .algorithms import ALGORITHMS
+from .. import __version__
+from ..algorithms import ALGORITHMS
 from .auto_weights import AutoWeights
 from .driver import Driver, Rules
-from .errors import InputError, shape_text
+from ..errors import InputError, shape_text
 from .noise import residual_noise
 from .phases import Phases
 from .priors import PRIORS, build_priors, singular_values
@@ -48,7 +49,7 @@ class Reconstruction:
 
     def run(self, progress: Callable[[dict], None] | None = None, snapshots=(), iters: int | None = None,
             stop_at_fit: float | None = None) -> Result:
-        """The result (see :meth:`clsdcam.solver.Solver.solve` for the arguments)."""
+        """The result (see :meth:`clsdcam.solve.solver.Solver.solve` for the arguments)."""
         if self.b is None:
             self.units = Units(1.0, self.solver.calibration.scale)
             return self._result(self.model.embed(np.zeros(self._window_shape())), [], "zero measurement")
@@ -96,7 +97,7 @@ class Reconstruction:
     def _residual_figures(self, problem: Problem, x) -> tuple[float, float]:
         """(‖r‖/‖b‖, rms(r)/σ̂(r)) of the final residual r = Av − b: how much of the measurement the cube leaves
         unexplained, and whether that is noise (rms over the noise level read from r's finest wavelet details,
-        :func:`clsdcam.noise.residual_noise`: 1.0–4.0 on the simulator's six panel scenes, 8.6–18.8 with a
+        :func:`clsdcam.solve.noise.residual_noise`: 1.0–4.0 on the simulator's six panel scenes, 8.6–18.8 with a
         calibration of the right size but another camera's, 60 iterations, 64×96×16; the bright sparse scenes,
         point sources and narrow lines, leave the most unfitted structure)."""
         problem.residual(x)
@@ -158,7 +159,8 @@ class Reconstruction:
 
 class DataReferences:
     """What a relative prior weight of 1 means for a (normalised) measurement b on the device, each computed on
-    first use: ``atb_max`` = ‖Aᵀb‖_∞, ``atb_sigma1`` = σ₁(Aᵀb), ``lipschitz`` = L (see :mod:`clsdcam.priors`)."""
+    first use: ``atb_max`` = ‖Aᵀb‖_∞, ``atb_sigma1`` = σ₁(Aᵀb), ``lipschitz`` = L
+    (see :mod:`clsdcam.solve.priors`)."""
 
     def __init__(self, model, b, lipschitz: float):
         self.model, self.b, self.lipschitz = model, b, lipschitz

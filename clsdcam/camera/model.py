@@ -3,7 +3,7 @@
     A v = Σ_k F_k ⊙ crop(h ∗ v_k)                 (K, Hp, Wp) field -> (H, W) sensor
     Aᵀ r = [ h ⋆ pad(F_k ⊙ r) ]_k                 (H, W) -> (K, Hp, Wp)
 
-The scene field and the window in it are a :class:`~clsdcam.geometry.FieldGeometry`: the
+The scene field and the window in it are a :class:`~clsdcam.camera.geometry.FieldGeometry`: the
 paper's 2H × 2W with the whole PSF frame by default, or the support-sized field of the
 ``--support-field`` option. The convolution is circular on the field, which equals the linear one on the
 sensor window (see geometry.py). The filtered convolution is the backend's (``backend.convolution``,
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 from .geometry import FieldGeometry, centred_geometry, default_field_shape, transfer_function, window_offset
 
 __all__ = ["ForwardModel", "default_field_shape", "window_offset"]
@@ -22,7 +22,7 @@ __all__ = ["ForwardModel", "default_field_shape", "window_offset"]
 POWER_ITERS = 30          # at most, for the Lipschitz constant
 POWER_TOL = 1e-4          # stop once the Rayleigh quotient moves less than this (relative)
 REFRESH_FLAT = 0.01       # a refreshed basis's start: the flat cube's weight beside the old eigenvector, mapped
-REFRESH_TOL = 1e-3        # and its tolerance, a tenth of the margin (clsdcam.spaces.Spaces.onto)
+REFRESH_TOL = 1e-3        # and its tolerance, a tenth of the margin (clsdcam.solve.spaces.Spaces.onto)
 PREDICTED_CHANGE = 4.0    # near the dominant vector, λ's next change over ‖AᵀAv‖/‖v‖ − λ, at most
 
 

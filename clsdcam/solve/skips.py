@@ -1,13 +1,13 @@
 """What a scene doesn't need, decided once per calibration or per solve, and what skipping it saved.
 
 * field (``--support-field``; off by default, docs/accuracy.md): the scene area the PSF cannot bring onto the
-  sensor is not part of the problem (support-sized field, :func:`clsdcam.geometry.support_geometry`). The
+  sensor is not part of the problem (support-sized field, :func:`clsdcam.camera.geometry.support_geometry`). The
   solve is not the paper's field's: the paper's field keeps a margin of unknowns the data never touch, which
   the TV prox moves only slowly from zero, and it shapes how the scene just outside the window is estimated
   (0.2 dB at 500 iterations on a real cube at full size, docs/accuracy.md);
 * bands: a band no pixel's filter sees adds nothing to b and gets no gradient: no FFTs for it;
 * subspace (``--subspace`` or ``--rank``; off by default, docs/accuracy.md): when the scene's spectra span few
-  dimensions, r spectral basis vectors instead of K bands (:mod:`clsdcam.subspace`): 4r FFTs per iteration
+  dimensions, r spectral basis vectors instead of K bands (:mod:`clsdcam.solve.subspace`): 4r FFTs per iteration
   instead of 4K;
 * terms: a regulariser with zero weight is never evaluated.
 
@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .backends import seen_bands
-from .errors import shape_text
-from .geometry import FieldGeometry, centred_geometry, support_geometry
+from ..backends import seen_bands
+from ..errors import shape_text
+from ..camera.geometry import FieldGeometry, centred_geometry, support_geometry
 
 
 def plan_geometry(psf: np.ndarray, backend, support: bool) -> FieldGeometry:

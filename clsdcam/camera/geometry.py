@@ -31,7 +31,7 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 SUPPORT_TAIL = 1e-4     # L1 mass of the PSF left outside its measured support
 

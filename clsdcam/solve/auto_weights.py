@@ -1,6 +1,7 @@
-"""Automatic prior weights as a hook of the phases (:mod:`clsdcam.phases`): weights set to ``auto``
-(:mod:`clsdcam.priors`) start at their rule's start and are chosen at iteration ``AUTO_AT`` from the noise level of
-that iterate's residual (:func:`clsdcam.noise.residual_noise`, relative to max|b|), in every space (``--no-skip``
+"""Automatic prior weights as a hook of the phases (:mod:`clsdcam.solve.phases`): weights set to ``auto``
+(:mod:`clsdcam.solve.priors`) start at their rule's start and are chosen at iteration ``AUTO_AT`` from the noise
+level of
+that iterate's residual (:func:`clsdcam.solve.noise.residual_noise`, relative to max|b|), in every space (``--no-skip``
 too); the algorithm goes on with its momentum under the new objective."""
 from __future__ import annotations
 

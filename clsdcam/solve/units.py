@@ -5,7 +5,7 @@ The solver divides the measurement by s = max|b| and works on b/s, so every arra
 
 * cubes (the result, its snapshots, a video's carried field) in the calibration's units: v_data = v·s/c, with c
   the factor the calibration divided its model by when it normalised the PSF and filters
-  (:attr:`clsdcam.calibration.Calibration.scale`); a warm start comes in the other way, v = v_data·c/s;
+  (:attr:`clsdcam.camera.calibration.Calibration.scale`); a warm start comes in the other way, v = v_data·c/s;
 * records (data term, objective) in the measurement's units squared: ½‖b − Av‖² scales by s².
 """
 from __future__ import annotations

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError, shape_text
+from ..errors import InputError, shape_text
 
 GROUP = "raw"
 

@@ -17,7 +17,7 @@ class Result:
     attrs: dict
     full_field: np.ndarray | None = None
     snapshots: dict[int, np.ndarray] = field(default_factory=dict)  # iteration -> (K, H, W) cube, as ``cube`` is
-    state: SolverState | None = None     # what the next frame of a stream can start from (clsdcam.state)
+    state: SolverState | None = None     # what the next frame of a stream can start from (clsdcam.solve.state)
 
     @property
     def iterations(self) -> int:
@@ -29,6 +29,6 @@ class Result:
 
     def save(self, path):
         """Write the cube, wavelengths, history and attributes to HDF5, atomically."""
-        from .io import write_cube
+        from ..io import write_cube
 
         write_cube(path, self.cube, self.wavelengths, self.history, self.attrs, full_field=self.full_field)

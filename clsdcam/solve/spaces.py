@@ -1,5 +1,5 @@
-"""The spaces one solve's iterates can live in, as the phases (:mod:`clsdcam.phases`) see them: band space, the
-spectral subspace of a basis (:mod:`clsdcam.subspace`), the sensor window of an iterate, and the full-space step
+"""The spaces one solve's iterates can live in, as the phases (:mod:`clsdcam.solve.phases`) see them: band space, the
+spectral subspace of a basis (:mod:`clsdcam.solve.subspace`), the sensor window of an iterate, and the full-space step
 the subspace's checks take. Built by the solver for each solve; nothing here reaches the solver."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .model import REFRESH_FLAT, REFRESH_TOL
+from ..camera.model import REFRESH_FLAT, REFRESH_TOL
 from .priors import ProxAverage
 from .problem import Problem
 from .subspace import SpectralSubspace
@@ -68,12 +68,13 @@ class Spaces:
         return Problem(self.model, self.b, average.prox, average.value, self.n_bands, **self._parts())
 
     def _parts(self) -> dict:
-        """What every problem of this solve hands an algorithm's sub-problems (:class:`~clsdcam.problem.Problem`)."""
+        """What every problem of this solve hands an algorithm's sub-problems
+        (:class:`~clsdcam.solve.problem.Problem`)."""
         return {"priors": self.priors, "filters": self.filters, "shared": self._shared}
 
     def subspace(self, basis: np.ndarray, power: dict | None = None) -> Problem:
         """The problem on ``basis``: its L by a power iteration started as ``power`` says
-        (:class:`~clsdcam.subspace.SpectralSubspace`), else from band space's eigenvector projected onto the basis
+        (:class:`~clsdcam.solve.subspace.SpectralSubspace`), else from band space's eigenvector projected onto the basis
         beside the flat cube; none when the last basis was the same."""
         known = self._last.get(basis)
         if power is None and known is None:

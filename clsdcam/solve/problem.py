@@ -4,7 +4,7 @@
     F(x) = ½‖A_s x − b‖² + g(E x)
 
 where x is the band cube (E = I, A_s = A) or a spectral subspace's coefficients
-(E = B, A_s = A·B, see :mod:`clsdcam.subspace`). The phases move the iterates between spaces;
+(E = B, A_s = A·B, see :mod:`clsdcam.solve.subspace`). The phases move the iterates between spaces;
 each space knows how to turn its iterate back into a band cube (:meth:`Problem.to_field`).
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import Callable, Sequence
 
 class Problem:
     """The data term through ``model`` and the prior through ``prox`` / ``penalty``, for one normalised b;
-    ``subspace`` (a :class:`~clsdcam.subspace.SpectralSubspace`) when x holds its coefficients. What an algorithm
+    ``subspace`` (a :class:`~clsdcam.solve.subspace.SpectralSubspace`) when x holds its coefficients. What an algorithm
     with sub-problems of its own builds them from (:mod:`clsdcam.algorithms.base`): ``priors`` (the priors g is made
     of), ``filters`` (the calibration's, (K, H, W)) and ``shared`` (the solver's store across its solves)."""
 

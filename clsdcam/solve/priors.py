@@ -14,7 +14,7 @@ term's stiffest curvature). So scaling a measurement by s scales the cube by s, 
 suit any PSF or filter normalisation.
 
 A weight can also be ``auto`` for a prior with an ``auto_weight`` rule: it starts at a relative weight
-and, once the measurement's noise level σ̂ (relative to max|b|) is known (:mod:`clsdcam.noise`), becomes
+and, once the measurement's noise level σ̂ (relative to max|b|) is known (:mod:`clsdcam.solve.noise`), becomes
 ``per_noise``·σ̂. A soft-thresholding denoiser's best threshold grows with the noise (the universal
 threshold is ∝ σ); ``per_noise`` is calibrated on the simulator's scenes (docs/benchmarks.md, "Choosing
 ``--tv``").

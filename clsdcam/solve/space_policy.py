@@ -1,6 +1,6 @@
 """When a solve changes space: band space → spectral subspace → moves between bases → back, as pure decisions
 (host arrays in, an action out: :class:`Stay`, :class:`Enter`, :class:`Move`, :class:`Leave`); the phases
-(:mod:`clsdcam.phases`) observe the solve and carry them out.
+(:mod:`clsdcam.solve.phases`) observe the solve and carry them out.
 
 The default stays in band space: no signal read during a solve certifies that a basis holds the spectra the full
 problem would find (on scenes of many smooth, overlapping spectra the automatic subspace cost 3.6–5.1° of
@@ -8,7 +8,8 @@ spectral angle at full size, with a basis of 21 vectors for 8 true spectra), and
 (docs/accuracy.md) admits no loss. ``Settings.subspace`` turns the automatic subspace on, as a speed option.
 
 The basis is read from the spectra as the spectral angle weighs them: the unit spectra of the lit pixels of the
-sensor window (:func:`clsdcam.subspace.lit_shapes`), so a faint object's spectrum counts as much as a bright one's;
+sensor window (:func:`clsdcam.solve.subspace.lit_shapes`), so a faint object's spectrum counts as much as a bright
+one's;
 ``rank_for(ENTRY_TAIL)`` directions leave at most that mean sin² of them outside.
 
 1. Band space for ``WARMUP`` iterations, then until the spectra settle (:func:`has_settled`, read every
@@ -24,7 +25,7 @@ sensor window (:func:`clsdcam.subspace.lit_shapes`), so a faint object's spectru
    the "core" rank) but grows when they need more directions; when the step also lowers the data term by more
    than ``WIDEN_GAIN`` (relative), the measurement holds content the basis cannot represent, and up to as many
    directions again are added: those the step turns the lit spectra towards
-   (:func:`clsdcam.subspace.turning_directions`). When r would pass K/2 the solve returns to band space.
+   (:func:`clsdcam.solve.subspace.turning_directions`). When r would pass K/2 the solve returns to band space.
 """
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
-"""The phases of one solve: the driver (:mod:`clsdcam.driver`) runs the algorithm in band space, and, with
-``--subspace`` or ``--rank R``, in spectral subspaces, as :mod:`clsdcam.space_policy` decides; the hooks (automatic
-weights, :mod:`clsdcam.auto_weights`) act between iterations. This module observes and acts; the decisions are the
+"""The phases of one solve: the driver (:mod:`clsdcam.solve.driver`) runs the algorithm in band space, and, with
+``--subspace`` or ``--rank R``, in spectral subspaces, as :mod:`clsdcam.solve.space_policy` decides; the hooks
+(automatic
+weights, :mod:`clsdcam.solve.auto_weights`) act between iterations. This module observes and acts; the decisions are the
 policy's: it reads the spectra (every ``SETTLE_EVERY`` iterations during the warm-up, one full step every
 ``CHECK_EVERY`` in a subspace) and moves the algorithm's iterates between spaces (``driver.move``), the moves shielded
 from Ctrl-C (:func:`clsdcam.interrupts.held_interrupt`). Every phase, check and widening is counted in the history
@@ -11,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import space_policy as policy
-from .interrupts import held_interrupt
+from ..interrupts import held_interrupt
 from .problem import Problem
 from .skips import subspace_line
 from .space_policy import Enter, Leave, Move, Stay, has_settled, on_check, on_entry, read, subspace_allowed

@@ -1,6 +1,6 @@
 """The driver: runs any algorithm (:mod:`clsdcam.algorithms`) on a problem, phase by phase, and owns everything
 around its iterations: the history, the stopping rules and their reasons, Ctrl-C, the per-iteration callback
-(progress, snapshots), timing, and the checkpoints (:mod:`clsdcam.checkpoints`).
+(progress, snapshots), timing, and the checkpoints (:mod:`clsdcam.solve.checkpoints`).
 
     for each iteration k:  record = algorithm.iterate(problem)     (its numbers)
                            guard against divergence (back-off)
@@ -20,7 +20,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from .algorithms import ALGORITHMS
+from ..algorithms import ALGORITHMS
 from .checkpoints import Checkpoints
 
 

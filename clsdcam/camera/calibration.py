@@ -5,7 +5,7 @@ Layouts read:
   in MATLAB v5 (scipy.io) or v7.3 (HDF5; MATLAB stores arrays transposed, undone here);
 - our HDF5: ``psf`` (H,W), ``filters`` (K,H,W), ``wavelengths`` (K,); optionally ``dead_pixels`` (H,W) bool
   (pixels left out of every reconstruction, from ``clsdcam calibrate filters``) and a group ``raw``: the steps that
-  turned raw frames into the calibration's size (:mod:`clsdcam.raw`), which ``prepare`` applies to a
+  turned raw frames into the calibration's size (:mod:`clsdcam.camera.raw`), which ``prepare`` applies to a
   measurement of the recorded raw size.
 Inside, filters are (K,H,W) (docs/conventions.md); the file's (H,W,K) is converted at load time.
 
@@ -24,8 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from .raw import RawSteps, read_record, write_record
-from .errors import InputError, shape_text
-from .io import MAX_DATASET_BYTES, as_real_array, atomic_output, existing_file, first_line, read_dataset, require_finite
+from ..errors import InputError, shape_text
+from ..io import (MAX_DATASET_BYTES, as_real_array, atomic_output, existing_file, first_line, read_dataset,
+                  require_finite)
 
 REFERENCE_CROP = (100, 420, 80, 540)  # rows 100:420, cols 80:540 of the 494×659 raw frame
 DEFECT_HALF = 2                        # the reference zeroes [i−2:i+2, j−2:j+2]
@@ -38,7 +39,7 @@ class Calibration:
     ``scale``: the factor the model A was divided by when the PSF and filters were normalised
     (:func:`preprocess`); a cube solved on this calibration, divided by it, is in the units of the
     calibration as it was measured (normalising conditions the solve, it does not change the units).
-    ``raw``: the raw steps of the PSF frames (:class:`clsdcam.raw.RawSteps`), None if unknown;
+    ``raw``: the raw steps of the PSF frames (:class:`clsdcam.camera.raw.RawSteps`), None if unknown;
     ``dead_pixels``: (H,W) bool, pixels whose filter function is not to be trusted (None: none).
     """
 
@@ -122,7 +123,7 @@ def _is_mat_v5(path: Path) -> bool:
 
 def _read_mat_v5(path: Path):
     """The numeric variables of a v5 file, through our bounds-checked reader (see ``matv5``)."""
-    from .matv5 import MatFormatError, read_mat_v5
+    from ..matv5 import MatFormatError, read_mat_v5
 
     try:
         contents = read_mat_v5(path.read_bytes(), MAX_DATASET_BYTES)

@@ -1,0 +1,62 @@
+"""The phases of one solve (clsdcam.solve.phases): the driver run through the spaces for the solve's budget, hooks
+acting between iterations when due, and Ctrl-C ending the run with a reason."""
+import numpy as np
+import pytest
+
+from clsdcam.algorithms.fista import Fista
+from clsdcam.sim import simulate
+from clsdcam.solve.driver import Driver, Rules
+from clsdcam.solve.phases import Phases
+from clsdcam.solve.priors import build_priors
+from clsdcam.solve.settings import Settings
+from clsdcam.solve.solver import Solver
+from clsdcam.solve.spaces import LastLipschitz, Spaces
+from clsdcam.solve.tracker import Tracker
+from clsdcam.solve.units import Units
+
+
+class Hook:
+    """Acts once, at iteration ``at``; records when."""
+
+    def __init__(self, at):
+        self.at, self.acted = at, []
+
+    def due_in(self, done, iters):
+        return self.at - done if not self.acted and done < self.at <= done + iters else None
+
+    def act(self, problem, driver):
+        self.acted.append(driver.iterations)
+
+
+def phases_for(settings, hooks=(), progress=None):
+    sim = simulate(scene="leds", shape=(32, 48), n_bands=8, seed=5)
+    solver = Solver(sim.calibration, settings=settings)
+    be, model = solver.backend, solver.model
+    b = be.to_device(sim.measurement / np.abs(sim.measurement).max())
+    priors = build_priors(be, settings, lambda name: 1.0)
+    spaces = Spaces(model, b, priors, sim.calibration.filters, solver.lipschitz, LastLipschitz())
+    driver = Driver(Fista(be, model.embed(np.zeros((8, 32, 48))), 1.0 / solver.lipschitz, Rules()), Rules(),
+                    spaces.band.objective)
+    return Phases(driver, spaces, Tracker(model, Units(1.0), progress=progress), settings, settings.iters, hooks)
+
+
+def test_band_space_runs_the_budget_and_a_hook_acts_when_due():
+    hook = Hook(7)
+    phases = phases_for(Settings(iters=12), (hook,))
+    assert phases.run(warm_started=False) == "iterations"
+    assert phases.driver.iterations == 12 and hook.acted == [7] and phases.basis() is None
+
+
+def test_a_fixed_rank_enters_its_subspace_after_the_warm_up():
+    phases = phases_for(Settings(iters=40, rank=3))
+    phases.run(warm_started=False)
+    assert phases.basis().shape == (8, 3) and phases.problem.rank == 3
+
+
+def test_ctrl_c_ends_the_run_with_its_reason(default_sigint):
+    def interrupt(record):
+        if record["iteration"] == 4:
+            raise KeyboardInterrupt
+
+    phases = phases_for(Settings(iters=12), progress=interrupt)
+    assert phases.run(warm_started=False) == "interrupted" and phases.driver.iterations == 4
