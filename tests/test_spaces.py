@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam import model as model_module
+from clsdcam.camera import model as model_module
 from clsdcam.camera.model import ForwardModel
 from clsdcam.solve.priors import build_priors
 from clsdcam.solve.settings import Settings
