@@ -4,6 +4,7 @@ import numpy as np
 
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.solve.priors import build_priors
+from clsdcam.solve.reconstruction import Reconstruction
 from clsdcam.solve.settings import Settings
 from clsdcam.sim import simulate
 from clsdcam.solve.solver import Solver
@@ -32,10 +33,10 @@ def test_a_start_gives_the_priors_its_weights_and_no_auto_estimate():
     assert cold[0].auto
 
 
-def test_the_solver_plans_cold_and_warm_starts():
+def test_a_solve_plans_cold_and_warm_starts():
     sim = simulate(scene="leds", shape=(32, 48), n_bands=8, seed=0)
     solver = Solver(sim.calibration, settings=Settings(iters=5, step_scale=0.9))
-    cold = solver._start(None, 1.0)
+    cold = Reconstruction(solver, sim.measurement).start()
     assert not cold.warm and cold.basis is None and cold.step_factor == 0.9 and not np.any(cold.field)
-    warm = solver._start(np.ones((8, 32, 48)), 2.0)
+    warm = Reconstruction(solver, sim.measurement, x0=np.ones((8, 32, 48))).start()
     assert warm.warm and warm.field.shape == solver.model.cube_shape and warm.field.max() > 0

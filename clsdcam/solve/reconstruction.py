@@ -54,7 +54,7 @@ class Reconstruction:
             self.units = Units(1.0, self.solver.calibration.scale)
             return self._result(self.model.embed(np.zeros(self._window_shape())), [], "zero measurement")
         be, s, solver = self.backend, self.settings, self.solver
-        start = self._state.start(be, self.units.solver_factor) if self._state else self._start()
+        start = self._state.start(be, self.units.solver_factor) if self._state else self.start()
         priors = build_priors(be, s, start.reference(DataReferences(self.model, self.b, solver.lipschitz).value))
         start.apply_weights(priors)
         spaces = Spaces(self.model, self.b, priors, solver.calibration.filters, solver.lipschitz,
@@ -110,8 +110,9 @@ class Reconstruction:
     def _bands_line(self):
         return bands_line(self.solver.calibration.filters) if self.settings.skip else None
 
-    def _start(self) -> Start:
-        """A start without a state: zero, a (K, H, W) sensor-window cube (zero around it), or a whole field."""
+    def start(self) -> Start:
+        """Where this solve starts without a state: zero, the warm start x0 as a (K, H, W) sensor-window cube (zero
+        around it), or x0 as a whole field, in solver units."""
         return Start(self._first_iterate(), self.settings.step_scale, warm=self._x0 is not None)
 
     def _first_iterate(self):
