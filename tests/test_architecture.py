@@ -26,19 +26,28 @@ def modules() -> dict[str, Path]:
     return {module_name(p): p for p in PACKAGE.rglob("*.py")}
 
 
+def package_of(path: Path) -> str:
+    name = module_name(path)
+    return name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+
+
+def source_module(node: ast.ImportFrom, package: str) -> str:
+    """The absolute module a ``from … import`` in ``package`` reads from (relative imports resolved)."""
+    if not node.level:
+        return node.module or ""
+    anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
+    return ".".join(anchor + ([node.module] if node.module else []))
+
+
 def imports(path: Path, known: set[str]) -> set[str]:
     """clsdcam modules imported anywhere in ``path`` (module level or inside functions)."""
-    name = module_name(path)
-    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    name, package = module_name(path), package_of(path)
     found = set()
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.Import):
             found |= {alias.name for alias in node.names if alias.name in known}
         elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
-                base = ".".join(anchor + ([node.module] if node.module else []))
+            base = source_module(node, package)
             for alias in node.names:
                 candidate = f"{base}.{alias.name}"
                 found.add(candidate if candidate in known else base)
@@ -77,15 +86,11 @@ def test_backends_import_nothing_above_them():
 
 def imported_names(path: Path, known: set[str]) -> list[tuple[str, str]]:
     """(module, name) for each ``from <clsdcam module> import name`` in ``path`` (relative or absolute)."""
-    name = module_name(path)
-    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    package = package_of(path)
     found = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
-                base = ".".join(anchor + ([node.module] if node.module else []))
+            base = source_module(node, package)
             if base in known:
                 found += [(base, alias.name) for alias in node.names]
     return found

@@ -43,15 +43,15 @@ class Reconstruction:
         self.solver = solver
         self.model, self.backend, self.settings = solver.model, solver.backend, solver.settings
         b = solver.checked(measurement)
-        self.units = Units(float(np.max(np.abs(b))), solver.calibration.scale)
-        self.b = self.backend.to_device(b / self.units.measurement) if self.units.measurement else None
+        scale = float(np.max(np.abs(b)))          # s; a zero measurement keeps s = 1 (nothing to solve)
+        self.units = Units(scale or 1.0, solver.calibration.scale)
+        self.b = self.backend.to_device(b / scale) if scale else None
         self._x0, self._state = x0, state
 
     def run(self, progress: Callable[[dict], None] | None = None, snapshots=(), iters: int | None = None,
             stop_at_fit: float | None = None) -> Result:
         """The result (see :meth:`clsdcam.solve.solver.Solver.solve` for the arguments)."""
         if self.b is None:
-            self.units = Units(1.0, self.solver.calibration.scale)
             return self._result(self.model.embed(np.zeros(self._window_shape())), [], "zero measurement")
         be, s, solver = self.backend, self.settings, self.solver
         start = self._state.start(be, self.units.solver_factor) if self._state else self.start()
