@@ -68,8 +68,7 @@ class PrimalDual(Algorithm):
             dual.ascend(2.0 * after - before, 1.0 / (8.0 * len(dual.axes) * self.step))
         be.copy(be.to_device(after.astype(be.dtype)), out=self.x)
         moved = after - before
-        return {"data": data, "change": ratio(float(np.vdot(moved, moved)), float(np.vdot(after, after))),
-                "transforms": problem.transforms()}
+        return {"data": data, "change": ratio(float(np.vdot(moved, moved)), float(np.vdot(after, after)))}
 
     def _build_dual(self, problem) -> TvDual:
         """The sub-problem from the problem's TV prior (a zero-weight TV when it has none), resumed if carried."""

@@ -20,8 +20,7 @@ class ProximalGradient(Algorithm):
         before = be.copy(self.x)
         problem.prox(self.z, self.step, self.x)
         moved = be.axpy(-1.0, before, self.x, out=before)
-        return {"data": data, "change": ratio(be.vdot(moved, moved), be.vdot(self.x, self.x)),
-                "transforms": problem.transforms()}
+        return {"data": data, "change": ratio(be.vdot(moved, moved), be.vdot(self.x, self.x))}
 
     def reset(self, point) -> None:
         self.backend.copy(point, out=self.x)

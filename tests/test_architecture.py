@@ -163,6 +163,18 @@ def test_what_an_algorithm_can_do_is_declared_on_its_base_and_read_without_getat
                 assert not set(literal) & capabilities, f"{name}: {ast.unparse(node)}"
 
 
+def test_no_algorithm_counts_its_own_transforms():
+    """An iteration's FFTs are declared (``Algorithm.transforms``) and put in the record by the driver: no module of
+    clsdcam.algorithms, nor a test plug-in, has a ``"transforms"`` key in a dict or a subscript."""
+    plug_ins = Path(__file__).parent.glob("*_algorithm.py")
+    paths = [path for name, path in modules().items() if name.startswith("clsdcam.algorithms")] + list(plug_ins)
+    assert len(paths) > 3
+    for path in paths:
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            keys = node.keys if isinstance(node, ast.Dict) else [node.slice] if isinstance(node, ast.Subscript) else []
+            assert not any(isinstance(k, ast.Constant) and k.value == "transforms" for k in keys), path.name
+
+
 def test_no_module_above_400_lines():
     long = {name: n for name, path in modules().items() if (n := len(path.read_text().splitlines())) > MAX_LINES}
     assert not long, long

@@ -12,7 +12,7 @@ BACKEND = NumpyBackend("float64")
 
 
 def hook(tv="auto") -> AutoWeights:
-    return AutoWeights(build_priors(BACKEND, Settings(tv=tv), lambda name: 1.0), [])
+    return AutoWeights(build_priors(BACKEND, Settings(tv=tv), lambda name: 1.0))
 
 
 @pytest.mark.parametrize("done, iters, due", [
@@ -34,7 +34,7 @@ class Residual:
 
     def __init__(self):
         self.residual_buffer = np.random.default_rng(0).normal(0, 0.01, (256, 256))
-        self.x, self.iterations, self.rescored = None, AUTO_AT, []
+        self.x, self.iterations, self.rescored, self.notes = None, AUTO_AT, [], []
 
     def residual(self, x):
         return self.residual_buffer
@@ -45,6 +45,9 @@ class Residual:
     def rescore(self, objective):
         self.rescored.append(objective)
 
+    def note(self, *lines):
+        self.notes += lines
+
 
 def test_act_chooses_from_the_noise_and_rescores():
     weights, stand_in = hook(), Residual()
@@ -52,5 +55,5 @@ def test_act_chooses_from_the_noise_and_rescores():
     weights.act(stand_in, stand_in)
     assert not prior.auto and weights.chosen["noise_estimate"] == pytest.approx(0.01, rel=0.05)
     assert prior.relative == pytest.approx(prior.auto_weight.for_noise(weights.chosen["noise_estimate"]))
-    assert stand_in.rescored == [stand_in.objective] and "tv: auto" in weights.lines[0]
+    assert stand_in.rescored == [stand_in.objective] and "tv: auto" in stand_in.notes[0]
     assert weights.due_in(0, 300) is None

@@ -1,13 +1,12 @@
 """The driver (clsdcam.solve.driver) running FISTA: a closed-form problem, stopping rules, checkpoints, back-off,
-Ctrl-C,
-moves between spaces."""
+Ctrl-C, moves between spaces, and the events its observers hear."""
 
 import numpy as np
 import pytest
 
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.algorithms.fista import Fista
-from clsdcam.solve.driver import Driver, Functions, Rules, minimize
+from clsdcam.solve.driver import Driver, Functions, Observer, Rules, minimize
 
 BACKEND = NumpyBackend("float64")
 
@@ -160,3 +159,64 @@ def test_fista_stops_on_an_objective_plateau():
     assert result.stop_reason == "plateau" and 10 < result.iterations < 5000
     checked = [r["objective"] for r in result.history if np.isfinite(r["objective"])]
     assert checked[-2] - checked[-1] < 1e-9 * abs(checked[-1])
+
+
+class Recorder(Observer):
+    """Every event it hears, in order; at each iteration, whether the record was in the history already."""
+
+    def __init__(self, driver=None):
+        self.driver, self.events = driver, []
+
+    def on_iteration(self, record, x, problem):
+        self.events.append(("iteration", record["iteration"], record is self.driver.history[-1], problem))
+
+    def on_note(self, line):
+        self.events.append(("note", line))
+
+    def on_work(self, transforms):
+        self.events.append(("work", transforms))
+
+
+def test_observers_hear_each_iteration_note_and_work_in_the_order_they_were_added():
+    problem = Quadratic(4)
+    driver, functions = problem.driver()
+    first, second = Recorder(driver), Recorder(driver)
+    driver.observe(first)
+    driver.note("a line", None, "another")
+    driver.observe(second)
+    driver.work(12)
+    driver.run(functions, 2)
+    heard = [("work", 12), ("iteration", 1, True, functions), ("iteration", 2, True, functions)]
+    assert first.events == [("note", "a line"), ("note", "another")] + heard and second.events == heard
+
+
+class Counted(Functions):
+    """A problem whose gradient costs 4 transforms."""
+
+    def transforms(self):
+        return 4
+
+
+class Costly(Fista):
+    """An algorithm that declares its own cost."""
+
+    def transforms(self, problem):
+        return 7
+
+
+@pytest.mark.parametrize("algorithm, per_iteration", [(Fista, 4), (Costly, 7)])
+def test_the_record_counts_the_algorithms_declared_transforms_and_a_checkpoints_forward(algorithm, per_iteration):
+    problem = Quadratic(5)
+    rules = Rules(objective_every=3)
+    driver = Driver(algorithm(BACKEND, np.zeros_like(problem.exact), 1 / problem.lipschitz, rules), rules,
+                    problem.objective)
+    driver.run(Counted(problem.gradient_step, problem.prox), 6)
+    assert [r["transforms"] for r in driver.history] == [per_iteration + 2 * (k in (1, 3, 6)) for k in range(1, 7)]
+
+
+def test_minimize_adapts_its_on_iteration_function_into_an_observer():
+    problem = Quadratic(6)
+    seen = []
+    result = problem.run(iters=3, on_iteration=lambda record, x: seen.append((record, x.copy())))
+    assert [record for record, _ in seen] == result.history
+    np.testing.assert_array_equal(seen[-1][1], result.x)

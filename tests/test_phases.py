@@ -5,13 +5,13 @@ import pytest
 
 from clsdcam.algorithms.fista import Fista
 from clsdcam.sim import simulate
-from clsdcam.solve.driver import Driver, Rules
+from clsdcam.solve.driver import Driver, Observer, Rules
 from clsdcam.solve.phases import Phases
 from clsdcam.solve.priors import build_priors
 from clsdcam.solve.settings import Settings
 from clsdcam.solve.solver import Solver
 from clsdcam.solve.spaces import LastLipschitz, Spaces
-from clsdcam.solve.tracker import Tracker
+from clsdcam.solve.tracker import Progress, Ranks
 from clsdcam.solve.units import Units
 
 
@@ -35,9 +35,10 @@ def phases_for(settings, hooks=(), progress=None):
     b = be.to_device(sim.measurement / np.abs(sim.measurement).max())
     priors = build_priors(be, settings, lambda name: 1.0)
     spaces = Spaces(model, b, priors, sim.calibration.filters, solver.lipschitz, LastLipschitz())
+    observers = [Ranks()] + ([Progress(Units(1.0), progress)] if progress else [])
     driver = Driver(Fista(be, model.embed(np.zeros((8, 32, 48))), 1.0 / solver.lipschitz, Rules()), Rules(),
-                    spaces.band.objective)
-    return Phases(driver, spaces, Tracker(model, Units(1.0), progress=progress), settings, settings.iters, hooks)
+                    spaces.band.objective, observers)
+    return Phases(driver, spaces, settings, settings.iters, hooks)
 
 
 def test_band_space_runs_the_budget_and_a_hook_acts_when_due():
@@ -47,10 +48,27 @@ def test_band_space_runs_the_budget_and_a_hook_acts_when_due():
     assert phases.driver.iterations == 12 and hook.acted == [7] and phases.basis() is None
 
 
-def test_a_fixed_rank_enters_its_subspace_after_the_warm_up():
-    phases = phases_for(Settings(iters=40, rank=3))
+class Heard(Observer):
+    """The notes and the work between iterations the driver's observers hear."""
+
+    def __init__(self):
+        self.notes, self.work = [], []
+
+    def on_note(self, line):
+        self.notes.append(line)
+
+    def on_work(self, transforms):
+        self.work.append(transforms)
+
+
+def test_a_fixed_rank_enters_its_subspace_after_the_warm_up_and_says_so_through_the_driver():
+    """The entry is a note; its power iteration and each check's full step are work the observers hear."""
+    phases, heard = phases_for(Settings(iters=40, rank=3)), Heard()
+    phases.driver.observe(heard)
     phases.run(warm_started=False)
     assert phases.basis().shape == (8, 3) and phases.problem.rank == 3
+    assert heard.notes[0].startswith("subspace: 3 spectral basis vectors") and len(heard.work) >= 3
+    assert all(transforms > 0 for transforms in heard.work)
 
 
 def test_ctrl_c_ends_the_run_with_its_reason(default_sigint):

@@ -13,7 +13,7 @@ from clsdcam.sim.kinds import make_kind
 from clsdcam.sim.scenes import FAINT_LINE
 from clsdcam.solve.spaces import Spaces
 from clsdcam.solve.subspace import SpectralSubspace
-from clsdcam.solve.tracker import Tracker
+from clsdcam.solve.tracker import Work
 
 
 @pytest.fixture(scope="module")
@@ -144,8 +144,8 @@ def test_fft_work_done_counts_each_subspaces_power_iteration(leds, monkeypatch):
     """The work done is the iterations' transforms, the basis checks' and every new subspace's power passes: a forced
     rank refreshes its basis at each check, and each refresh's L costs at least one AᵀA pass."""
     counted, checks, powers = [], [], []
-    count, check, built = Tracker.count, Spaces.full_step_transforms, SpectralSubspace.__init__
-    monkeypatch.setattr(Tracker, "count", lambda self, t, f=0: counted.append(t) or count(self, t, f))
+    count, check, built = Work.count, Spaces.full_step_transforms, SpectralSubspace.__init__
+    monkeypatch.setattr(Work, "count", lambda self, t, f=0: counted.append(t) or count(self, t, f))
     monkeypatch.setattr(Spaces, "full_step_transforms", lambda *a, **k: checks.append(check(*a, **k)) or checks[-1])
     monkeypatch.setattr(SpectralSubspace, "__init__",
                         lambda self, *a, **k: built(self, *a, **k) or powers.append(self.power_transforms))

@@ -15,8 +15,10 @@ once there). To the driver an algorithm is:
 * ``backend``: the backend its arrays live on; ``x``: the current iterate (what the checkpoints score and the
   solve returns); ``step``: its step size (the checkpoints halve it on a back-off);
 * ``iterate(problem) -> dict``: one iteration; the record's numbers, at least ``data`` (f where the gradient was
-  taken), ``change`` (‖x⁺ − x‖/‖x⁺‖) and ``transforms`` (the FFTs it did), plus its own (FISTA: ``momentum``,
-  ``restart``);
+  taken) and ``change`` (‖x⁺ − x‖/‖x⁺‖), plus its own (FISTA: ``momentum``, ``restart``);
+* ``transforms(problem) -> int``: the 2-D FFTs an iteration on ``problem`` does, declared (by default one ∇f's:
+  ``problem.transforms()``), read by the driver after each iteration into the record's ``transforms``: an
+  algorithm counts no work of its own;
 * ``reset(point)``: every iterate to ``point``, any momentum afresh (the checkpoints' rollback);
 * ``move(mapping)``: every iterate through ``mapping`` (a change of space, e.g. onto a spectral basis), any
   momentum kept. A mapping with ``keeps_shape`` true also takes ``out=``, an array of the iterates' shape other
@@ -60,8 +62,12 @@ class Algorithm:
         self.backend, self.step = backend, step
 
     def iterate(self, problem) -> dict:
-        """One iteration; the record's numbers (``data``, ``change``, ``transforms``, and the algorithm's own)."""
+        """One iteration; the record's numbers (``data``, ``change``, and the algorithm's own)."""
         raise NotImplementedError
+
+    def transforms(self, problem) -> int:
+        """The 2-D FFTs one iteration on ``problem`` does (read after it): one gradient's by default."""
+        return problem.transforms()
 
     def reset(self, point) -> None:
         """Every iterate to ``point`` (copied), momentum afresh."""

@@ -62,8 +62,7 @@ class Fista(Algorithm):
         t_next = next_momentum(self.t)
         self._extrapolate((self.t - 1.0) / t_next)       # y = x⁺ + β(x⁺ − x)
         self.t = t_next
-        return {"data": data, "change": ratio(step_sq, norm_sq), "momentum": self.t, "restart": bool(uphill),
-                "transforms": problem.transforms()}
+        return {"data": data, "change": ratio(step_sq, norm_sq), "momentum": self.t, "restart": bool(uphill)}
 
     def reset(self, point) -> None:
         for array in (self.x, self.x_prev, self.y):

@@ -2,7 +2,8 @@
 (:mod:`clsdcam.solve.priors`) start at their rule's start and are chosen at iteration ``AUTO_AT`` from the noise
 level of
 that iterate's residual (:func:`clsdcam.solve.noise.residual_noise`, relative to max|b|), in every space (``--no-skip``
-too); the algorithm goes on with its momentum under the new objective."""
+too); the algorithm goes on with its momentum under the new objective, and the driver's observers hear each choice as
+a note (the skip report's line)."""
 from __future__ import annotations
 
 from .noise import residual_noise
@@ -13,9 +14,8 @@ AUTO_AT = 30               # auto weights are chosen from the noise of this iter
 class AutoWeights:
     """The auto-weighted priors of one solve, chosen once at AUTO_AT."""
 
-    def __init__(self, priors: list, report_lines: list[str]):
+    def __init__(self, priors: list):
         self.priors = priors
-        self.lines = report_lines
         self.chosen: dict = {}          # what was chosen, for the result's attributes
 
     def due_in(self, done: int, iters: int) -> int | None:
@@ -24,12 +24,13 @@ class AutoWeights:
         return AUTO_AT - done if pending and done < AUTO_AT <= done + iters else None
 
     def act(self, problem, driver) -> None:
-        """Choose from the noise σ̂ of the residual at the driver's iterate; the driver rescores under the new F."""
+        """Choose from the noise σ̂ of the residual at the driver's iterate, noted to its observers; the driver
+        rescores under the new F."""
         noise = residual_noise(problem.backend.to_host(problem.residual(driver.x)))
         for prior in (prior for prior in self.priors if prior.auto):
             prior.set_relative(prior.auto_weight.for_noise(noise))
             prior.auto = False
-            self.lines.append(f"{prior.name}: auto, {prior.relative:.3g} (noise σ ≈ {noise:.3g} of max|b|, from the "
-                              f"residual at iteration {driver.iterations})")
+            driver.note(f"{prior.name}: auto, {prior.relative:.3g} (noise σ ≈ {noise:.3g} of max|b|, from the "
+                        f"residual at iteration {driver.iterations})")
         self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)

@@ -1,11 +1,17 @@
 """The driver: runs any algorithm (:mod:`clsdcam.algorithms`) on a problem, phase by phase, and owns everything
-around its iterations: the history, the stopping rules and their reasons, Ctrl-C, the per-iteration callback
-(progress, snapshots), timing, and the checkpoints (:mod:`clsdcam.solve.checkpoints`).
+around its iterations: the history, the stopping rules and their reasons, Ctrl-C, the events its observers hear,
+timing, and the checkpoints (:mod:`clsdcam.solve.checkpoints`).
 
     for each iteration k:  record = algorithm.iterate(problem)     (its numbers)
+                           record["transforms"] = algorithm.transforms(problem)    (declared, not counted by it)
                            guard against divergence (back-off)
                            at k = 1, every ``objective_every`` and a phase's last: checkpoint F(x) (+ a forward)
-                           history ← record; on_iteration(record, x); stop?
+                           history ← record; each observer.on_iteration(record, x, problem); stop?
+
+Observers (:class:`Observer`, SCICO's ``itstat_insert_func`` as events) hear each iteration, the notes the code
+around the loop makes (:meth:`Driver.note`: a skip taken, a space entered, a weight chosen) and the FFT work it
+does between iterations (:meth:`Driver.work`: a subspace's power iteration, a full-step check); the solve's are
+in :mod:`clsdcam.solve.tracker`.
 
 It stops after ``iters`` iterations, when the relative change ‖x⁺ − x‖/‖x⁺‖ falls below ``tol``
 ("tolerance"), when the objective fell by less than ``plateau`` (relative) between two checkpoints ("plateau"),
@@ -18,7 +24,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from ..algorithms import ALGORITHMS
 from .checkpoints import Checkpoints
@@ -34,16 +40,47 @@ class Rules:
     restart: bool = True
 
 
+class Observer:
+    """What a driver tells those who watch it; each event is a no-op here, an observer overrides those it needs.
+    Observers hear each event in the order they were added."""
+
+    def on_iteration(self, record: dict, x, problem) -> None:
+        """After each iteration on ``problem``, its record in the history already (a Ctrl-C inside keeps it)."""
+
+    def on_note(self, line: str) -> None:
+        """A line for the solve's report."""
+
+    def on_work(self, transforms: int) -> None:
+        """2-D FFTs done between iterations (one ∇f costs ``problem.transforms()``)."""
+
+
 class Driver:
     """One solve's loop around ``algorithm`` (whose x is the start), with ``rules``; ``objective`` F (or None: no
-    checkpoints) for the space it starts in."""
+    checkpoints) for the space it starts in; ``observers`` hear its events."""
 
-    def __init__(self, algorithm, rules: Rules = Rules(), objective: Callable[[Any], float] | None = None):
+    def __init__(self, algorithm, rules: Rules = Rules(), objective: Callable[[Any], float] | None = None,
+                 observers: Iterable[Observer] = ()):
         self._start = time.perf_counter()
         self.algorithm = algorithm
         self.rules = rules
         self.history: list[dict] = []
         self.checkpoints = Checkpoints(algorithm, objective, algorithm.backend.dtype)
+        self.observers = list(observers)
+
+    def observe(self, observer: Observer):
+        """``observer`` hears every event from now on, after those added before it."""
+        self.observers.append(observer)
+
+    def note(self, *lines: str | None):
+        """Tell the observers each line that is not None."""
+        for line in filter(None, lines):
+            for observer in self.observers:
+                observer.on_note(line)
+
+    def work(self, transforms: int):
+        """Tell the observers of 2-D FFTs done outside the iterations."""
+        for observer in self.observers:
+            observer.on_work(transforms)
 
     @property
     def x(self):
@@ -57,15 +94,14 @@ class Driver:
     def iterations(self) -> int:
         return len(self.history)
 
-    def run(self, problem, iters: int, on_iteration: Callable[[dict, Any], None] | None = None,
-            should_stop: Callable[[], str | None] | None = None) -> str | None:
+    def run(self, problem, iters: int, should_stop: Callable[[], str | None] | None = None) -> str | None:
         """Up to ``iters`` more iterations on ``problem``; the reason it stopped early, or None."""
         try:
             for i in range(iters):
                 record = self._iteration(problem, last=i == iters - 1)
-                self.history.append(record)        # counted before the callback: a Ctrl-C inside it keeps it
-                if on_iteration is not None:
-                    on_iteration(record, self.x)
+                self.history.append(record)        # counted before the observers: a Ctrl-C inside them keeps it
+                for observer in self.observers:
+                    observer.on_iteration(record, self.x, problem)
                 reason = self._stop_reason(record, should_stop)
                 if reason:
                     return reason
@@ -88,7 +124,8 @@ class Driver:
     def _iteration(self, problem, last: bool) -> dict:
         k = self.iterations + 1
         numbers = self.algorithm.iterate(problem)
-        record = self.checkpoints.guard({**numbers, "step": self.algorithm.step, "rollback": False, "backoff": False})
+        record = self.checkpoints.guard({**numbers, "transforms": self.algorithm.transforms(problem),
+                                         "step": self.algorithm.step, "rollback": False, "backoff": False})
         record["iteration"] = k
         if self.checkpoints.active and (k % self.rules.objective_every == 0 or k == 1 or last):
             record.update(self.checkpoints.check())
@@ -131,6 +168,16 @@ class Functions:
         return 0
 
 
+class Callback(Observer):
+    """An ``on_iteration(record, x)`` function as an observer (:func:`minimize`'s)."""
+
+    def __init__(self, function: Callable[[dict, Any], None]):
+        self.function = function
+
+    def on_iteration(self, record: dict, x, problem) -> None:
+        self.function(record, x)
+
+
 def minimize(gradient_step: Callable, prox: Callable, backend, x0, *, step: float, iters: int,
              algorithm: str = "fista", objective: Callable[[Any], float] | None = None,
              on_iteration: Callable[[dict, Any], None] | None = None,
@@ -138,6 +185,7 @@ def minimize(gradient_step: Callable, prox: Callable, backend, x0, *, step: floa
     """Run ``algorithm`` from x0 (a backend array, not modified) in one phase; ``rules``: the fields of
     :class:`Rules`."""
     rules = Rules(**rules)
-    driver = Driver(ALGORITHMS[algorithm](backend, x0, step, rules), rules, objective)
-    reason = driver.run(Functions(gradient_step, prox), iters, on_iteration, should_stop) or "iterations"
+    observers = [Callback(on_iteration)] if on_iteration is not None else []
+    driver = Driver(ALGORITHMS[algorithm](backend, x0, step, rules), rules, objective, observers)
+    reason = driver.run(Functions(gradient_step, prox), iters, should_stop) or "iterations"
     return Run(x=driver.x, iterations=driver.iterations, stop_reason=reason, step=driver.step, history=driver.history)

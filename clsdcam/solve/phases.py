@@ -5,7 +5,9 @@ weights, :mod:`clsdcam.solve.auto_weights`) act between iterations. This module 
 policy's: it reads the spectra (every ``SETTLE_EVERY`` iterations during the warm-up, one full step every
 ``CHECK_EVERY`` in a subspace) and moves the algorithm's iterates between spaces (``driver.move``), the moves shielded
 from Ctrl-C (:func:`clsdcam.interrupts.held_interrupt`). Every phase, check and widening is counted in the history
-(``rank``, ``transforms``) and the skip report, whose FFT work done counts each new subspace's power iteration too.
+(``rank``, ``transforms``) and the skip report: each phase and widening is a note the driver's observers hear
+(``driver.note``), and each new subspace's power iteration and each check's full step is work they count
+(``driver.work``).
 """
 from __future__ import annotations
 
@@ -17,16 +19,14 @@ from .problem import Problem
 from .skips import subspace_line
 from .space_policy import Enter, Leave, Move, Stay, has_settled, on_check, on_entry, read, subspace_allowed
 from .spaces import Spaces
-from .tracker import Tracker
 
 
 class Phases:
     """Runs one solve's driver through its spaces (see the module docstring)."""
 
-    def __init__(self, driver, spaces: Spaces, tracker: Tracker, settings, iters: int, hooks=(), should_stop=None):
+    def __init__(self, driver, spaces: Spaces, settings, iters: int, hooks=(), should_stop=None):
         self.driver = driver
         self.spaces = spaces
-        self.tracker = tracker
         self.rank = settings.rank                   # a fixed basis size, or 0
         self.allowed = subspace_allowed(settings.skip, settings.rank, settings.subspace, spaces.n_bands)
         self.iters = iters                          # this solve's budget
@@ -101,14 +101,13 @@ class Phases:
             iters -= first
 
     def _iterate(self, iters: int) -> str | None:
-        return self.driver.run(self.problem, iters, self.tracker.on(self.problem), self.should_stop)
+        return self.driver.run(self.problem, iters, self.should_stop)
 
     # ---- carrying out the policy's actions -----------------------------------------------------------
     def _enter_subspace(self):
         action = on_entry(self._read(), self.rank, self.spaces.n_bands)
         if isinstance(action, Stay):
-            self.tracker.report.lines.append(subspace_line(self.spaces.n_bands, self.spaces.n_bands, 0, 1.0,
-                                                           action.why))
+            self.driver.note(subspace_line(self.spaces.n_bands, self.spaces.n_bands, 0, 1.0, action.why))
         else:
             self._enter(action)
 
@@ -120,8 +119,8 @@ class Phases:
         self._count_power(sub)
         self.driver.move(sub.subspace.project, self._step(sub.subspace.lipschitz), sub.objective, evaluate=False)
         self.problem = sub
-        self.tracker.report.lines.append(subspace_line(action.basis.shape[1], self.spaces.n_bands,
-                                                       self.driver.iterations + 1, action.captured, action.how))
+        self.driver.note(subspace_line(action.basis.shape[1], self.spaces.n_bands, self.driver.iterations + 1,
+                                       action.captured, action.how))
 
     def _check_width(self):
         """One full proximal-gradient step from v = B·c, and the policy's Move or Leave."""
@@ -129,7 +128,7 @@ class Phases:
         step = self.driver.step * self.lipschitz / self.spaces.lipschitz      # the full space's step
         judged = not self.rank                     # a fixed rank's check reads only the stepped spectra
         gain, before, stepped = self.spaces.full_step(problem, self.driver.x, step, judged)
-        self.tracker.count(self.spaces.full_step_transforms(problem, judged))
+        self.driver.work(self.spaces.full_step_transforms(problem, judged))
         action = on_check(before, stepped, gain, problem.subspace.basis, self.core, self.rank, self.spaces.n_bands)
         self.core = action.core
         if isinstance(action, Leave):
@@ -164,7 +163,7 @@ class Phases:
     def _count_power(self, problem: Problem):
         """The 2-D FFTs of a new subspace's power iteration for L, counted as work done (work the full solver, one
         space with one L, does not do)."""
-        self.tracker.count(problem.subspace.power_transforms)
+        self.driver.work(problem.subspace.power_transforms)
 
     def _step(self, lipschitz: float) -> float:
         """The step for a space of Lipschitz constant L: the driver's current step·L (step_scale, halved by any
@@ -173,7 +172,7 @@ class Phases:
         return scale / lipschitz
 
     def _note(self, what: str, gain: float):
-        self.tracker.report.lines.append(f"{what} (a full step lowered the data term by {100 * gain:.1f}%)")
+        self.driver.note(f"{what} (a full step lowered the data term by {100 * gain:.1f}%)")
 
     # ---- what the result reports and the next solve can carry ---------------------------------------
     def refreshes_line(self) -> str | None:

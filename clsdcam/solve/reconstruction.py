@@ -3,8 +3,9 @@ backend) and one measurement, and owns everything that lives for that solve alon
 
 * b / s on the device, with s = max|b|, and the solve's :class:`~clsdcam.solve.units.Units` (every conversion between
   solver and data units, for the cube, its snapshots, the history and the carried state);
-* its start (:mod:`clsdcam.solve.state`), priors, spaces (:mod:`clsdcam.solve.spaces`), algorithm, driver, tracker
-and phases;
+* its start (:mod:`clsdcam.solve.state`), priors, spaces (:mod:`clsdcam.solve.spaces`), algorithm, driver, the
+  driver's observers (:mod:`clsdcam.solve.tracker`: ranks, FFT work and the skip report, snapshots, progress) and
+  phases;
 * the :class:`~clsdcam.solve.result.Result` it hands back.
 
 The solver keeps only what serves every solve of its calibration: the model, its Lipschitz constant, the last
@@ -27,10 +28,10 @@ from .phases import Phases
 from .priors import PRIORS, build_priors, singular_values
 from .problem import Problem
 from .result import Result
-from .skips import bands_line, field_line, terms_line
+from .skips import SkipReport, bands_line, field_line, terms_line
 from .spaces import Spaces
 from .state import SolverState, Start
-from .tracker import Tracker
+from .tracker import Progress, Ranks, Snapshots, Work
 from .units import Units
 
 
@@ -63,22 +64,22 @@ class Reconstruction:
         algorithm = ALGORITHMS[s.algorithm](be, start.field, start.step_factor / solver.lipschitz, rules)
         if start.carry is not None:
             algorithm.resume(*start.carry)
+        work, copies = Work(self.model), Snapshots(self.model, self.units, snapshots)
+        observers = [Ranks(), work, copies] + ([Progress(self.units, progress)] if progress is not None else [])
         # a carried basis is entered at once: no band-space F(x0)
-        driver = Driver(algorithm, rules, None if start.basis is not None else spaces.band.objective)
-        tracker = Tracker(self.model, self.units, snapshots, progress)
+        driver = Driver(algorithm, rules, None if start.basis is not None else spaces.band.objective, observers)
         off = [row.name for row in PRIORS if row.name not in {p.name for p in priors}]
-        tracker.report.lines += [line for line in (field_line(solver.geometry), self._bands_line(), terms_line(off))
-                                 if line]
-        weights = AutoWeights(priors, tracker.report.lines)
-        phases = Phases(driver, spaces, tracker, s, iters or s.iters, (weights,), self._fit_rule(driver, stop_at_fit))
+        driver.note(field_line(solver.geometry), self._bands_line(), terms_line(off))
+        weights = AutoWeights(priors)
+        phases = Phases(driver, spaces, s, iters or s.iters, (weights,), self._fit_rule(driver, stop_at_fit))
         reason = phases.run(start.warm, start.basis, start.core)
-        tracker.report.lines += [line for line in (phases.refreshes_line(),) if line]
+        driver.note(phases.refreshes_line())
         field = phases.problem.solution(driver.x)
-        out = self._result(field, driver.history, reason, priors, driver.step, tracker)
+        out = self._result(field, driver.history, reason, priors, driver.step, work.report)
         out.attrs.update({f"{p.name}_chosen": p.relative for p in priors}, **weights.chosen)
         fit, structure = self._residual_figures(phases.problem, driver.x)
         out.attrs.update(relative_residual=fit, residual_to_noise=structure)
-        out.snapshots = tracker.kept
+        out.snapshots = copies.kept
         carry = algorithm.carry()
         factor = self.units.cube_factor
         out.state = SolverState(be.scale(factor, field), phases.basis(), phases.core, phases.step_factor(),
@@ -130,7 +131,7 @@ class Reconstruction:
         return (self.model.n_bands,) + self.model.sensor_shape
 
     def _result(self, x, history, reason, priors: list | None = None, step: float = 0.0,
-                tracker: Tracker | None = None) -> Result:
+                report: SkipReport | None = None) -> Result:
         solver, model, units = self.solver, self.model, self.units
         cube = units.cube(model.window(x))
         full = units.cube(self.backend.to_host(x)) if self.settings.full_field else None
@@ -147,8 +148,8 @@ class Reconstruction:
             "field_shape": model.field_shape,
             "window_offset": model.offset,
             "active_priors": ",".join(p.name for p in priors or ()),
-            "skips": tracker.report.summary() if tracker else "",
-            "fft_work_saved": tracker.report.saved if tracker else 0.0,
+            "skips": report.summary() if report else "",
+            "fft_work_saved": report.saved if report else 0.0,
             "final_rank": history[-1]["rank"] if history else model.n_bands,
             "clsdcam_version": __version__,
             "calibration": solver.calibration.source,

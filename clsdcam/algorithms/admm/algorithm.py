@@ -88,7 +88,11 @@ class Admm(Algorithm):
                 self.reset(self.x)
             self._resumed = None
         data, (step, norm) = self.splitting.iterate(self.state)
-        return {"data": data, "change": ratio(step, norm), "transforms": self.splitting.transforms}
+        return {"data": data, "change": ratio(step, norm)}
+
+    def transforms(self, problem) -> int:
+        """The c-step's: 2K forward and 2K inverse, every band (after the first iteration built the steps)."""
+        return self.splitting.transforms
 
     @property
     def x(self):
