@@ -2,7 +2,8 @@
 (:mod:`clsdcam.solve.priors`) start at their rule's start and are chosen at iteration ``AUTO_AT`` from the noise
 level of
 that iterate's residual (:func:`clsdcam.solve.noise.residual_noise`, relative to max|b|), in every space (``--no-skip``
-too); the algorithm goes on with its momentum under the new objective."""
+too); the algorithm goes on with its momentum under the new objective. A solve that ends before AUTO_AT keeps the
+rule's start, and its report says so."""
 from __future__ import annotations
 
 from .noise import residual_noise
@@ -33,3 +34,10 @@ class AutoWeights:
                               f"residual at iteration {driver.iterations})")
         self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)
+
+    def unchosen(self, iterations: int) -> None:
+        """Say, for each weight still pending after a solve of ``iterations`` (fewer than AUTO_AT), that the solve
+        used its rule's start."""
+        for prior in (prior for prior in self.priors if prior.auto):
+            self.lines.append(f"{prior.name}: auto needs {AUTO_AT} iterations to read the noise; this "
+                              f"{iterations}-iteration solve used the rule's start {prior.relative:.3g}")

@@ -72,6 +72,7 @@ class Reconstruction:
         weights = AutoWeights(priors, tracker.report.lines)
         phases = Phases(driver, spaces, tracker, s, iters or s.iters, (weights,), self._fit_rule(driver, stop_at_fit))
         reason = phases.run(start.warm, start.basis, start.core)
+        weights.unchosen(driver.iterations)
         tracker.report.lines += [line for line in (phases.refreshes_line(),) if line]
         field = phases.problem.solution(driver.x)
         out = self._result(field, driver.history, reason, priors, driver.step, tracker)
