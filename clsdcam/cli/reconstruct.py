@@ -23,8 +23,11 @@ def add_parser(subparsers):
     add_solver_options(p)
     add_preprocessing_options(p)
     add_measurement_options(p)
-    p.add_argument("--saturation", type=number, default=None, metavar="LEVEL",
-                   help="exclude pixels whose raw value is ≥ LEVEL (saturated) from the data term")
+    p.add_argument("--saturation", type=saturation, default="auto", metavar="auto|none|LEVEL",
+                   help="pixels excluded from the data term as saturated, said in one line with their fraction "
+                        "(a frame more than half saturated is refused): auto (default) those at the integer type's "
+                        "maximum or on a flat plateau at the frame's maximum; none: keep every pixel; LEVEL: those "
+                        "whose value is ≥ LEVEL")
 
 
 def run(args) -> int:
@@ -48,6 +51,11 @@ def run(args) -> int:
     if truth is not None and code == 0:
         print_accuracy(result.cube, truth)
     return code
+
+
+def saturation(text: str):
+    """--saturation's value: "auto", None for "none", or a level."""
+    return None if text == "none" else text if text == "auto" else number(text)
 
 
 def measurement_files(args) -> list[str]:
