@@ -106,6 +106,8 @@ def read_h5_dataset(path: Path, key: str, what: str) -> np.ndarray:
     try:
         with h5py.File(path, "r") as f:
             return read_dataset(f, key, f"{what} {path}")
+    except InputError:      # a readable file without the dataset: said as it is
+        raise
     except (OSError, ValueError, KeyError, TypeError, RuntimeError, MemoryError) as exc:
         raise InputError(f"{what} {path}: not a readable HDF5 file ({first_line(exc)})") from None
 

@@ -111,3 +111,39 @@ def test_a_short_auto_solve_says_it_used_the_rules_start(sim, tmp_path, capsys):
     assert line in capsys.readouterr().out
     with h5py.File(output) as f:
         assert line in f.attrs["skips"] and f.attrs["tv_chosen"] == TV.auto_weight.start
+
+
+# ---- errors name what the user gave -------------------------------------------------------------------------
+def test_a_missing_dark_is_called_a_dark(sim, tmp_path, capsys):
+    assert reconstruct(sim, sim / "measurement.npy", "--dark", str(tmp_path / "nodark.tif")) == 2
+    assert one_line_error(capsys) == f"clsdcam: error: dark {tmp_path / 'nodark.tif'}: no such file"
+
+
+def test_a_colour_psf_frame_is_called_a_psf_frame(tmp_path, capsys):
+    from PIL import Image
+
+    Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(tmp_path / "rgb.png")
+    assert main(["calibrate", "psf", str(tmp_path / "rgb.png"), "-o", str(tmp_path / "psf.h5")]) == 2
+    assert one_line_error(capsys).startswith(f"clsdcam: error: psf frame {tmp_path / 'rgb.png'}: expected a 2-D")
+
+
+def test_exporting_a_calibration_says_it_holds_no_cube_not_that_it_is_unreadable(sim, tmp_path, capsys):
+    assert main(["export", str(sim / "calibration.h5"), "-o", str(tmp_path / "cube.tif")]) == 2
+    assert one_line_error(capsys) == (f"clsdcam: error: cube {sim / 'calibration.h5'}: no dataset 'cube' "
+                                      "(found: filters, psf, wavelengths)")
+
+
+def test_a_videos_truth_is_not_called_a_batch_output(tmp_path, capsys):
+    assert main(["simulate", str(tmp_path / "video"), *SIZE, "--frames", "3"]) == 0
+    capsys.readouterr()
+    assert main(["show", str(tmp_path / "video" / "truth.h5"), "--frame", "99"]) == 2
+    assert one_line_error(capsys) == (f"clsdcam: error: cube file {tmp_path / 'video' / 'truth.h5'}: no frame 99 "
+                                      "(its cubes are frames 0 to 2)")
+
+
+def test_an_option_that_took_the_measurement_says_so(sim, tmp_path, capsys):
+    measurement = str(sim / "measurement.npy")
+    assert main(["reconstruct", "--dark", "3", measurement, "--calibration", str(sim / "calibration.h5"),
+                 "-o", str(tmp_path / "cube.h5")]) == 2
+    assert one_line_error(capsys) == ("clsdcam: error: the following arguments are required: MEASUREMENT "
+                                      f"(--dark took '3 {measurement}': give --dark after them)")

@@ -41,8 +41,20 @@ class Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
+        self.parsed = argparse.Namespace()      # what the parse in progress has read, for error()
+
+    def parse_known_args(self, args=None, namespace=None):
+        self.parsed = argparse.Namespace() if namespace is None else namespace
+        return super().parse_known_args(args, self.parsed)
 
     def error(self, message):
+        """The usage error; a missing argument that an option of several values took says so."""
+        took = [f"{action.option_strings[-1]} took {' '.join(getattr(self.parsed, action.dest))!r}: give "
+                f"{action.option_strings[-1]} after them" for action in self._actions
+                if action.option_strings and action.nargs == "+"
+                and len(getattr(self.parsed, action.dest, None) or ()) > 1]
+        if took and message.startswith("the following arguments are required"):
+            message += f" ({'; '.join(took)})"
         raise InputError(message)
 
     def add_argument(self, *args, **kwargs):
