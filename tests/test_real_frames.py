@@ -147,3 +147,15 @@ def test_an_option_that_took_the_measurement_says_so(sim, tmp_path, capsys):
                  "-o", str(tmp_path / "cube.h5")]) == 2
     assert one_line_error(capsys) == ("clsdcam: error: the following arguments are required: MEASUREMENT "
                                       f"(--dark took '3 {measurement}': give --dark after them)")
+
+
+# ---- demo --quick ---------------------------------------------------------------------------------------------
+def test_demo_quick_writes_its_own_folder_and_help_names_both(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["demo", "--quick", *SIZE, "--iters", "3", "--quiet"]) == 0
+    assert (tmp_path / "clsdcam-demo-quick" / "cube.h5").exists() and not (tmp_path / "clsdcam-demo").exists()
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["demo", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "default clsdcam-demo/; with --quick clsdcam-demo-quick/" in text
