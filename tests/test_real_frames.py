@@ -1,6 +1,7 @@
 """A real camera's frames and honest messages (issue 48): saturated pixels excluded by default and said so, frames
 with nothing to reconstruct refused, a short ``--tv auto`` solve that says what it used, errors that name what the
 user gave. Everything through ``clsdcam.cli.main`` in-process, at the smallest sizes."""
+import re
 from pathlib import Path
 
 import numpy as np
@@ -159,3 +160,44 @@ def test_demo_quick_writes_its_own_folder_and_help_names_both(tmp_path, monkeypa
         main(["demo", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "default clsdcam-demo/; with --quick clsdcam-demo-quick/" in text
+
+
+# ---- help text ------------------------------------------------------------------------------------------------
+def parsers(parser, name="clsdcam"):
+    """(name, parser) for the command line and every sub-command, sub-sub-commands included."""
+    import argparse
+
+    yield name, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub, child in action.choices.items():
+                yield from parsers(child, f"{name} {sub}")
+
+
+def test_every_argument_of_every_command_has_help():
+    """Options and positional arguments; a list of sub-commands through each sub-command's own help."""
+    import argparse
+
+    from clsdcam.cli.options import build_parser
+
+    arguments = [(f"{name} {'/'.join(action.option_strings) or action.dest}", action)
+                 for name, parser in parsers(build_parser()) for action in parser._actions]
+    arguments = [(f"{name} {choice.dest}", choice) for name, action in arguments
+                 for choice in getattr(action, "_choices_actions", ())] + \
+        [(name, action) for name, action in arguments if not isinstance(action, argparse._SubParsersAction)]
+    assert not [name for name, action in arguments if not (action.help or "").strip()]
+
+
+def test_commands_describe_themselves_and_help_shows_no_empty_default(capsys):
+    import inspect
+
+    from clsdcam.cli.options import build_parser
+    from clsdcam.sim import simulate
+
+    for name, parser in parsers(build_parser()):
+        if name in ("clsdcam reconstruct", "clsdcam simulate", "clsdcam check", "clsdcam devices"):
+            assert len(parser.description or "") > 100, name
+        text = parser.format_help()
+        assert "(default: ())" not in text and "(default: None)" not in text, name
+    noise = next(a for a in dict(parsers(build_parser()))["clsdcam simulate"]._actions if a.dest == "noise")
+    assert float(re.search(r"\(default (\S+)\)", noise.help)[1]) == inspect.signature(simulate).parameters["noise_var"].default

@@ -30,7 +30,7 @@ def add_parser(subparsers):
     p.add_argument("outdir", nargs="?", default=None, metavar="OUTDIR",
                    help=f"the folder to write into (default: {OUTDIR}, with --quick {QUICK_OUTDIR})")
     p.add_argument("--report-at", type=iterations, default=(), metavar="N,N,...",
-                   help="also print the accuracy after these iterations, e.g. 100,500")
+                   help="also print the accuracy after these iterations, e.g. 100,500 (default: the final one only)")
     p.add_argument("--quick", action="store_true",
                    help=f"a first look: --size {QUICK['size'][0]}x{QUICK['size'][1]} --iters {QUICK['iters']} "
                         "where not given (about a tenth of the default's time)")

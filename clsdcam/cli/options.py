@@ -163,7 +163,8 @@ def add_backend_options(p: argparse.ArgumentParser):
     p.add_argument("--fft", default="auto", choices=("auto", "host", "reikna", "vkfft"),
                    help="FFT engine (default auto: host pocketfft on the host path, vkfft if installed else reikna on "
                         "the device path)")
-    p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
+    p.add_argument("--dtype", default="float32", choices=("float32", "float64"),
+                   help="the solver's floating-point precision on the backend (float64 needs a device with fp64)")
 
 
 def add_solver_options(p: argparse.ArgumentParser):
@@ -236,7 +237,9 @@ def add_simulation_options(p: argparse.ArgumentParser):
     p.add_argument("--scene", default="target", choices=SCENES, metavar="SCENE",
                    help=f"{', '.join(SCENES)} (default target)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
-    p.add_argument("--noise", type=number, default=None, help="Gaussian noise variance relative to max(b)²")
+    p.add_argument("--noise", type=number, default=None,
+                   help="Gaussian read-noise variance relative to max(b)², after shot noise of 20 000 photons at the "
+                        "peak (default 1e-5)")
     p.add_argument("--size", type=size(), default=SENSOR_SHAPE, metavar="HxW",
                    help=f"sensor size (default {SENSOR_SHAPE[0]}x{SENSOR_SHAPE[1]})")
     p.add_argument("--bands", type=positive_int, default=N_BANDS, help=f"number of bands (default {N_BANDS})")

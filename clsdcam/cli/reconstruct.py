@@ -8,7 +8,11 @@ from .solve import print_accuracy, solve, write
 
 
 def add_parser(subparsers):
-    p = subparsers.add_parser("reconstruct", help="reconstruct a cube from one measurement", epilog=examples(
+    p = subparsers.add_parser("reconstruct", help="reconstruct a cube from one measurement", description=(
+        "Reconstruct a spectral cube (bands × height × width) from one measurement (several frames of one scene "
+        "are averaged) and a calibration: the measurement's own steps (dark, binning), the calibration's "
+        "preprocessing, saturated pixels left out, then the solver. Writes the cube as HDF5 with its history and "
+        "provenance, and prints what was done, the fit and, with --truth, the accuracy."), epilog=examples(
         "clsdcam reconstruct sim/measurement.npy --calibration sim/calibration.h5 -o cube.h5 --png cube",
         "clsdcam reconstruct raw.png --calibration calibration.mat --reference-preprocess -o cube.h5",
         "clsdcam reconstruct hand.tif --calibration psf.h5 -o hand.h5 --iters 500 --backend opencl",
