@@ -114,9 +114,9 @@ def prepare(measurement, calibration, options: "Preprocessing | None" = None, re
     nothing to reconstruct (all zero, or constant) is an InputError (:func:`check_signal`), and so is one mostly
     saturated (:func:`saturation_notes`); ``saturation="auto"`` becomes :func:`saturation_level`'s level.
 
-    What was done to the measurement (frames averaged, raw steps, saturated pixels excluded) is appended to the returned calibration's
-    ``source`` ("…; raw steps applied to the measurement: …"), and with it to the ``calibration`` attribute of a
-    cube solved on it; ``report`` (if given) is called with each of those lines."""
+    What was done to the measurement (frames averaged, raw steps, saturated pixels excluded) is appended to the
+    returned calibration's ``source`` ("…; raw steps applied to the measurement: …"), and with it to the
+    ``calibration`` attribute of a cube solved on it; ``report`` (if given) is called with each of those lines."""
     options = options or Preprocessing()
     if not isinstance(calibration, Calibration):
         calibration = Calibration.load(calibration)
