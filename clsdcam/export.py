@@ -70,15 +70,16 @@ def read_source(path, frame: int = 0) -> dict:
 
 
 def read_frame(path, frame: int) -> dict:
-    """Frame ``frame`` of a batch output, after :func:`check_virtual_sources`; InputError for a frame out of
-    range or one that failed (its ``error`` record)."""
+    """Frame ``frame`` of a file of ``cubes`` (a batch output, or a simulated video's truth), after
+    :func:`check_virtual_sources`; InputError for a frame out of range or one that failed (a batch output's
+    ``error`` record)."""
     path = check_virtual_sources(path)
-    with _open(path, "batch output") as f:
+    with _open(path, "cube file") as f:
         cubes = f["cubes"]
         if cubes.ndim != 4:
-            raise InputError(f"batch output {path}: expected cubes (N, K, H, W), found shape {cubes.shape}")
+            raise InputError(f"cube file {path}: expected cubes (N, K, H, W), found shape {cubes.shape}")
         if not 0 <= frame < len(cubes):
-            raise InputError(f"batch output {path}: no frame {frame} (it holds frames 0 to {len(cubes) - 1})")
+            raise InputError(f"cube file {path}: no frame {frame} (its cubes are frames 0 to {len(cubes) - 1})")
         error = f["error"].asstr()[frame] if "error" in f else ""
         if error:
             raise InputError(f"batch output {path}: frame {frame} failed ({error})")

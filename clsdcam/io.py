@@ -106,6 +106,8 @@ def read_h5_dataset(path: Path, key: str, what: str) -> np.ndarray:
     try:
         with h5py.File(path, "r") as f:
             return read_dataset(f, key, f"{what} {path}")
+    except InputError:      # a readable file without the dataset: said as it is
+        raise
     except (OSError, ValueError, KeyError, TypeError, RuntimeError, MemoryError) as exc:
         raise InputError(f"{what} {path}: not a readable HDF5 file ({first_line(exc)})") from None
 
@@ -131,30 +133,42 @@ def first_line(exc: BaseException) -> str:
 
 
 # ---- measurements -------------------------------------------------------------------------
-def load_measurement(path) -> np.ndarray:
+def load_measurement(path, what: str = "measurement") -> np.ndarray:
     """A raw sensor frame (H, W) float64, as stored (8/16-bit images are not rescaled).
 
     PNG/TIFF: 8- or 16-bit grey (a colour image is rejected); ``.npy``: a 2-D numeric array;
     ``.h5``/``.hdf5``: dataset ``measurement``. NaN/Inf values are rejected with their count
-    and first position.
+    and first position. Errors name the file as ``what`` (``dark``, ``psf frame``, …).
     """
-    path = existing_file(path, "measurement")
+    return load_frame(path, what)[0]
+
+
+def load_frame(path, what: str = "measurement") -> tuple[np.ndarray, float | None]:
+    """(frame, code): :func:`load_measurement`'s frame and the saturation code of its stored type
+    (:func:`code_max`)."""
+    path = existing_file(path, what)
     suffix = path.suffix.lower()
     if suffix in IMAGE_SUFFIXES:
-        data = read_image(path)
+        data = read_image(path, what)
     elif suffix == ".npy":
-        data = read_npy(path)
+        data = read_npy(path, what)
     elif suffix in (".h5", ".hdf5"):
-        data = read_h5_dataset(path, "measurement", "measurement")
+        data = read_h5_dataset(path, "measurement", what)
     else:
-        raise InputError(f"measurement {path}: unknown format {suffix!r} (expected .png, .tif, .npy or .h5)")
-    frame = as_real_array(data, f"measurement {path}")
+        raise InputError(f"{what} {path}: unknown format {suffix!r} (expected .png, .tif, .npy or .h5)")
+    frame = as_real_array(data, f"{what} {path}")
     if frame.ndim != 2:
-        raise InputError(f"measurement {path}: expected a 2-D grey image, found shape {frame.shape}")
-    return require_finite(frame, f"measurement {path}")
+        raise InputError(f"{what} {path}: expected a 2-D grey image, found shape {frame.shape}")
+    return require_finite(frame, f"{what} {path}"), code_max(np.asarray(data).dtype)
 
 
-def read_image(path: Path) -> np.ndarray:
+def code_max(dtype) -> float | None:
+    """The largest value of an integer type (the saturation code), None for other types."""
+    dtype = np.dtype(dtype)
+    return float(np.iinfo(dtype).max) if dtype.kind in "iu" else None
+
+
+def read_image(path: Path, what: str = "measurement") -> np.ndarray:
     """8/16-bit grey PNG or TIFF as an integer array (PIL for PNG, tifffile for TIFF). A file that holds no image
     data (tifffile reads a truncated TIFF as an empty array, and logs why) is an InputError, without the log."""
     try:
@@ -166,9 +180,9 @@ def read_image(path: Path) -> np.ndarray:
         else:
             data = _read_tiff(path)
     except Exception as exc:  # the imaging libraries raise many types for corrupt files
-        raise InputError(f"measurement {path}: not a readable image ({first_line(exc)})") from None
+        raise InputError(f"{what} {path}: not a readable image ({first_line(exc)})") from None
     if data.size == 0:
-        raise InputError(f"measurement {path}: not a readable image (no image data: truncated or damaged file)")
+        raise InputError(f"{what} {path}: not a readable image (no image data: truncated or damaged file)")
     return data
 
 
@@ -187,12 +201,12 @@ def _read_tiff(path: Path) -> np.ndarray:
         log.disabled = disabled
 
 
-def read_npy(path: Path) -> np.ndarray:
+def read_npy(path: Path, what: str = "measurement") -> np.ndarray:
     """Memory-map first, so a header that declares more data than the file holds fails cheaply."""
     try:
         return np.array(np.load(path, mmap_mode="r", allow_pickle=False))
     except Exception as exc:  # numpy's header parser raises ValueError, SyntaxError, TokenError, EOFError, …
-        raise InputError(f"measurement {path}: not a readable .npy array ({first_line(exc)})") from None
+        raise InputError(f"{what} {path}: not a readable .npy array ({first_line(exc)})") from None
 
 
 def save_measurement(path, frame: np.ndarray) -> Path:

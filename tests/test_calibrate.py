@@ -30,7 +30,9 @@ def save(path, array):
 # ---- frames and dark --------------------------------------------------------------------------------
 def test_frames_are_averaged_and_mixed_sizes_refused(tmp_path):
     a, b = save(tmp_path / "a.npy", np.full((4, 5), 2.0)), save(tmp_path / "b.npy", np.full((4, 5), 6.0))
-    np.testing.assert_array_equal(average_frames([a, b]), np.full((4, 5), 4.0))
+    mean, code = average_frames([a, b])
+    np.testing.assert_array_equal(mean, np.full((4, 5), 4.0))
+    assert code is None                 # float frames: no saturation code
     with pytest.raises(InputError, match="mixed sizes"):
         average_frames([a, save(tmp_path / "c.npy", np.zeros((4, 6)))])
 
@@ -145,7 +147,8 @@ def test_calibrate_psf_cli_writes_a_one_band_calibration_that_takes_raw_frames(t
     prepared, b = prepare(raw, tmp_path / "cal.h5")
     assert b.shape == (10, 12) and b[8, 9] == 10.0 and b.sum() == 10.0
     assert "raw steps applied to the measurement" in prepared.source
-    assert prepare(np.ones((10, 12)), tmp_path / "cal.h5")[1].sum() == 120     # calibration-size frames as they are
+    ramp = np.arange(120.0).reshape(10, 12)                    # (a constant frame is refused: nothing to solve)
+    assert prepare(ramp, tmp_path / "cal.h5")[1].sum() == ramp.sum()     # calibration-size frames as they are
 
 
 def test_all_dark_psf_is_refused(tmp_path, capsys):
@@ -207,7 +210,8 @@ def small_camera(tmp_path):
 
 
 def test_reconstruct_reports_and_records_the_measurement_steps(small_camera, tmp_path, capsys):
-    frames = [save(tmp_path / f"m{i}.npy", np.full((17, 21), v)) for i, v in enumerate((7.0, 9.0, 1e6))]
+    ramp = np.arange(17 * 21.0).reshape(17, 21)             # (a constant frame is refused: nothing to solve)
+    frames = [save(tmp_path / f"m{i}.npy", ramp + v) for i, v in enumerate((7.0, 9.0, 1e6))]
     dark = save(tmp_path / "dark.npy", np.full((17, 21), 3.0))
     assert main(["reconstruct", *frames, "--average", "2", "--dark", dark, "--bin", "2", "--calibration",
                  small_camera, "-o", str(tmp_path / "cube.h5"), "--iters", "5", "--quiet"]) == 0

@@ -87,6 +87,6 @@ def _stamp(path) -> tuple[int, int]:
 
 @functools.lru_cache(maxsize=DARKS_KEPT)
 def _mean_of(files: tuple[tuple[str, int, int], ...]) -> np.ndarray:
-    dark = average_frames([name for name, _, _ in files], "dark")
+    dark, _ = average_frames([name for name, _, _ in files], "dark")
     dark.setflags(write=False)
     return dark

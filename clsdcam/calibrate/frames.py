@@ -17,25 +17,27 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError, shape_text
-from ..io import IMAGE_SUFFIXES, read_image, read_npy, as_real_array, existing_file, first_line, load_measurement
+from ..io import IMAGE_SUFFIXES, read_image, read_npy, as_real_array, code_max, existing_file, first_line
+from ..io import load_frame, load_measurement
 from ..io import read_h5_dataset, require_finite
 
 FRAME_SUFFIXES = IMAGE_SUFFIXES + (".npy",)
 STACK_KEY = "frames"
 
 
-def average_frames(paths, what: str = "frame") -> np.ndarray:
-    """(1/n) Σ_i frame_i of the files (read by :func:`clsdcam.io.load_measurement`); InputError naming the
-    first file whose size differs from the first frame's."""
+def average_frames(paths, what: str = "frame") -> tuple[np.ndarray, float | None]:
+    """((1/n) Σ_i frame_i, code) of the files (read by :func:`clsdcam.io.load_frame`, errors naming them as
+    ``what``), code the saturation code of the first frame's stored type; InputError naming the first file whose
+    size differs from the first frame's."""
     paths = [Path(p) for p in paths]
-    total = load_measurement(paths[0]).copy()
+    total, code = load_frame(paths[0], what)
     for path in paths[1:]:
-        frame = load_measurement(path)
+        frame = load_measurement(path, what)
         if frame.shape != total.shape:
             raise InputError(f"{what} {path}: {shape_text(frame.shape)}, but {paths[0]} is "
                              f"{shape_text(total.shape)} (frames of mixed sizes)")
         total += frame
-    return total / len(paths)
+    return total / len(paths), code
 
 
 @dataclass(frozen=True)
@@ -71,12 +73,6 @@ def open_sweep(path) -> Sweep:
     if suffix not in opener:
         raise InputError(f"sweep {path}: expected a folder of frames, a .npy/.h5 stack or a multi-page TIFF")
     return opener[suffix](path)
-
-
-def code_max(dtype) -> float | None:
-    """The largest value of an integer type (the saturation code), None for other types."""
-    dtype = np.dtype(dtype)
-    return float(np.iinfo(dtype).max) if dtype.kind in "iu" else None
 
 
 def _native(path: Path) -> np.ndarray:

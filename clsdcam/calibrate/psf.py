@@ -31,7 +31,7 @@ class PsfCalibration:
 def calibrate_psf(paths, dark=None, dark_corner: int | None = None, crop=None, factor: int = 1,
                   center: bool = False) -> PsfCalibration:
     """The PSF of the module docstring from frame files; ``dark``: ``--dark``'s values (or None)."""
-    raw = average_frames(paths, "psf frame")
+    raw, _ = average_frames(paths, "psf frame")
     level, dark_frame, dark_text = resolve_dark(dark, dark_corner, raw)
     steps = RawSteps(raw.shape, level, dark_frame, crop, factor)
     image = apply_raw_steps(steps, raw)

@@ -200,7 +200,8 @@ class Preprocessing:
     normalize_filters: bool = True
     zero_defect: bool = False
     drop_last_band: bool = False
-    saturation: float | None = None          # exclude pixels with b ≥ saturation from the data term
+    saturation: float | str | None = None    # exclude pixels with b ≥ saturation from the data term; "auto":
+                                             # clsdcam.calibrate.measurement.saturation_level's level
     dead_pixels: PixelMask | None = None     # pixels to exclude, on the frame after cropping
     dark: float | tuple[str, ...] | None = None   # the measurement's dark: a level or dark frame files (averaged)
     bin: int = 1                             # the measurement's n × n binning (:mod:`.calibrate.measurement`)

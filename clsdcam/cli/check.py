@@ -11,6 +11,10 @@ def add_parser(subparsers):
     p = subparsers.add_parser(
         "check", help="check an OpenCL device: limits, memory plan, every primitive and a reconstruction against "
                       "NumPy, FFT engines' speed, kernels' GB/s (exit 1 when a check fails)",
+        description="Check one OpenCL device before trusting it with a reconstruction: its limits and the memory a "
+                    "full-size solve plans, every primitive and a short reconstruction against NumPy (the "
+                    "reference), the FFT engines' speed and the kernels' memory bandwidth, one row each. Exit 0 "
+                    "when every check passes, 1 when one fails.",
         epilog=examples("clsdcam check", "clsdcam check --device Intel --json intel.json",
                         "PYOPENCL_CTX=1 clsdcam check --json check.json"))
     p.add_argument("--device", default=None,

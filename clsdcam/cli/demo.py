@@ -11,6 +11,7 @@ from .simulate import simulation_kwargs
 from .solve import print_accuracy, solve, write
 
 QUICK = {"size": (160, 224), "iters": 100}   # --quick: a first look (half the sensor's sides, a third the iterations)
+OUTDIR, QUICK_OUTDIR = "clsdcam-demo", "clsdcam-demo-quick"   # the default folders: the full demo's, --quick's
 HALF_PEAK = 0.5     # a pixel passes a band when its filter transmits at least this fraction of the band's best pixel
 # the project's analyses, quoted by the note on the target (README, "What the demo shows"; measured 2026-11-25):
 PSF_RESOLUTION = "3.1 px"     # clsdcam analyze resolution: the simulated PSF's autocorrelation half-width at 70 %
@@ -19,12 +20,17 @@ TWO_POINT = "5–6 px"          # clsdcam analyze twopoint: two narrow-band poin
 
 def add_parser(subparsers):
     p = subparsers.add_parser("demo", help="simulate the default scene, reconstruct it, report accuracy and time",
+                              description=f"Simulate the default scene, reconstruct it, and write the cube, its "
+                                          f"pictures and the simulation into OUTDIR (default {OUTDIR}/; with --quick "
+                                          f"{QUICK_OUTDIR}/, so a first look leaves the full demo's folder alone); "
+                                          "print PSNR, spectral angle and time.",
                               epilog=examples("clsdcam demo", "clsdcam demo --quick    # a first look",
                                               "clsdcam demo out/ --iters 500 --report-at 100,300",
                                               "clsdcam demo small/ --size 64x96 --bands 16 --backend opencl"))
-    p.add_argument("outdir", nargs="?", default="clsdcam-demo")
+    p.add_argument("outdir", nargs="?", default=None, metavar="OUTDIR",
+                   help=f"the folder to write into (default: {OUTDIR}, with --quick {QUICK_OUTDIR})")
     p.add_argument("--report-at", type=iterations, default=(), metavar="N,N,...",
-                   help="also print the accuracy after these iterations, e.g. 100,500")
+                   help="also print the accuracy after these iterations, e.g. 100,500 (default: the final one only)")
     p.add_argument("--quick", action="store_true",
                    help=f"a first look: --size {QUICK['size'][0]}x{QUICK['size'][1]} --iters {QUICK['iters']} "
                         "where not given (about a tenth of the default's time)")
@@ -64,11 +70,14 @@ def run(args) -> int:
 
 
 def fill_defaults(args):
-    """--size and --iters where not given: the prototype's sensor and the solver's default, or QUICK's."""
+    """OUTDIR, --size and --iters where not given: OUTDIR, the prototype's sensor and the solver's default, or
+    QUICK_OUTDIR and QUICK's."""
     from ..camera.prototype import SENSOR_SHAPE
     from ..solve.settings import DEFAULT_ITERS
 
-    for name, value in (QUICK if args.quick else {"size": SENSOR_SHAPE, "iters": DEFAULT_ITERS}).items():
+    defaults = {"outdir": QUICK_OUTDIR, **QUICK} if args.quick else \
+        {"outdir": OUTDIR, "size": SENSOR_SHAPE, "iters": DEFAULT_ITERS}
+    for name, value in defaults.items():
         if getattr(args, name) is None:
             setattr(args, name, value)
 

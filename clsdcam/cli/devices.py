@@ -9,6 +9,9 @@ from .options import examples
 def add_parser(subparsers):
     subparsers.add_parser("devices", help="list OpenCL platforms and devices (memory, compute units, fp64) and the "
                                           "backend --backend auto (the default) chooses",
+                          description="List the OpenCL platforms and their devices (memory, compute units, fp64), "
+                                      "then the backend that --backend auto, the default of reconstruct, batch and "
+                                      "demo, chooses among them and why. Without pyopencl or a device: numpy.",
                           epilog=examples("clsdcam devices", "PYOPENCL_CTX=0 clsdcam devices"))
 
 

@@ -41,8 +41,20 @@ class Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
+        self.parsed = argparse.Namespace()      # what the parse in progress has read, for error()
+
+    def parse_known_args(self, args=None, namespace=None):
+        self.parsed = argparse.Namespace() if namespace is None else namespace
+        return super().parse_known_args(args, self.parsed)
 
     def error(self, message):
+        """The usage error; a missing argument that an option of several values took says so."""
+        took = [f"{action.option_strings[-1]} took {' '.join(getattr(self.parsed, action.dest))!r}: give "
+                f"{action.option_strings[-1]} after them" for action in self._actions
+                if action.option_strings and action.nargs == "+"
+                and len(getattr(self.parsed, action.dest, None) or ()) > 1]
+        if took and message.startswith("the following arguments are required"):
+            message += f" ({'; '.join(took)})"
         raise InputError(message)
 
     def add_argument(self, *args, **kwargs):
@@ -151,7 +163,8 @@ def add_backend_options(p: argparse.ArgumentParser):
     p.add_argument("--fft", default="auto", choices=("auto", "host", "reikna", "vkfft"),
                    help="FFT engine (default auto: host pocketfft on the host path, vkfft if installed else reikna on "
                         "the device path)")
-    p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
+    p.add_argument("--dtype", default="float32", choices=("float32", "float64"),
+                   help="the solver's floating-point precision on the backend (float64 needs a device with fp64)")
 
 
 def add_solver_options(p: argparse.ArgumentParser):
@@ -224,7 +237,9 @@ def add_simulation_options(p: argparse.ArgumentParser):
     p.add_argument("--scene", default="target", choices=SCENES, metavar="SCENE",
                    help=f"{', '.join(SCENES)} (default target)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
-    p.add_argument("--noise", type=number, default=None, help="Gaussian noise variance relative to max(b)²")
+    p.add_argument("--noise", type=number, default=None,
+                   help="Gaussian read-noise variance relative to max(b)², after shot noise of 20 000 photons at the "
+                        "peak (default 1e-5)")
     p.add_argument("--size", type=size(), default=SENSOR_SHAPE, metavar="HxW",
                    help=f"sensor size (default {SENSOR_SHAPE[0]}x{SENSOR_SHAPE[1]})")
     p.add_argument("--bands", type=positive_int, default=N_BANDS, help=f"number of bands (default {N_BANDS})")

@@ -8,7 +8,11 @@ from .solve import print_accuracy, solve, write
 
 
 def add_parser(subparsers):
-    p = subparsers.add_parser("reconstruct", help="reconstruct a cube from one measurement", epilog=examples(
+    p = subparsers.add_parser("reconstruct", help="reconstruct a cube from one measurement", description=(
+        "Reconstruct a spectral cube (bands × height × width) from one measurement (several frames of one scene "
+        "are averaged) and a calibration: the measurement's own steps (dark, binning), the calibration's "
+        "preprocessing, saturated pixels left out, then the solver. Writes the cube as HDF5 with its history and "
+        "provenance, and prints what was done, the fit and, with --truth, the accuracy."), epilog=examples(
         "clsdcam reconstruct sim/measurement.npy --calibration sim/calibration.h5 -o cube.h5 --png cube",
         "clsdcam reconstruct raw.png --calibration calibration.mat --reference-preprocess -o cube.h5",
         "clsdcam reconstruct hand.tif --calibration psf.h5 -o hand.h5 --iters 500 --backend opencl",
@@ -23,8 +27,11 @@ def add_parser(subparsers):
     add_solver_options(p)
     add_preprocessing_options(p)
     add_measurement_options(p)
-    p.add_argument("--saturation", type=number, default=None, metavar="LEVEL",
-                   help="exclude pixels whose raw value is ≥ LEVEL (saturated) from the data term")
+    p.add_argument("--saturation", type=saturation, default="auto", metavar="auto|none|LEVEL",
+                   help="pixels excluded from the data term as saturated, said in one line with their fraction "
+                        "(a frame more than half saturated is refused): auto (default) those at the integer type's "
+                        "maximum or on a flat plateau at the frame's maximum; none: keep every pixel; LEVEL: those "
+                        "whose value is ≥ LEVEL")
 
 
 def run(args) -> int:
@@ -48,6 +55,11 @@ def run(args) -> int:
     if truth is not None and code == 0:
         print_accuracy(result.cube, truth)
     return code
+
+
+def saturation(text: str):
+    """--saturation's value: "auto", None for "none", or a level."""
+    return None if text == "none" else text if text == "auto" else number(text)
 
 
 def measurement_files(args) -> list[str]:

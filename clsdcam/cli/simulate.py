@@ -17,12 +17,16 @@ def drift_pair(text: str) -> tuple[float, float]:
 
 
 def add_parser(subparsers):
-    p = subparsers.add_parser("simulate", help="simulate a camera, a scene and its measurement", epilog=examples(
+    p = subparsers.add_parser("simulate", help="simulate a camera, a scene and its measurement", description=(
+        "Simulate a Spectral DiffuserCam (caustic PSF, tiled filter array) looking at a scene, and write its "
+        "calibration.h5, the noisy measurement.npy and the true cube truth.h5 into OUTDIR (a video's frames.npy "
+        "with --frames, a monochromator sweep with --sweep): inputs for reconstruct, batch and calibrate whose "
+        "answer is known."), epilog=examples(
         "clsdcam simulate sim/ --scene target",
         "clsdcam simulate small/ --scene leds --size 64x96 --bands 16 --noise 1e-4",
         "clsdcam simulate video/ --scene leds --frames 16 --drift 0.3,0.6",
         "clsdcam simulate lab/ --sweep --size 48x64 --bands 16   # + a monochromator sweep to calibrate from"))
-    p.add_argument("outdir", help="the folder to write into")
+    p.add_argument("outdir", metavar="OUTDIR", help="the folder to write into")
     p.add_argument("--frames", type=positive_int, default=None,
                    help="write a video of N frames of the scene drifting (frames.npy, truth.h5)")
     p.add_argument("--drift", type=drift_pair, default=None, metavar="DY,DX",

@@ -3,7 +3,7 @@
 level of
 that iterate's residual (:func:`clsdcam.solve.noise.residual_noise`, relative to max|b|), in every space (``--no-skip``
 too); the algorithm goes on with its momentum under the new objective, and the driver's observers hear each choice as
-a note (the skip report's line)."""
+a note (the skip report's line). A solve that ends before AUTO_AT keeps the rule's start, and its report says so."""
 from __future__ import annotations
 
 from .noise import residual_noise
@@ -34,3 +34,10 @@ class AutoWeights:
                         f"residual at iteration {driver.iterations})")
         self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)
+
+    def unchosen(self, driver) -> None:
+        """Say, for each weight still pending after the driver's solve (fewer than AUTO_AT iterations), that the
+        solve used its rule's start."""
+        for prior in (prior for prior in self.priors if prior.auto):
+            driver.note(f"{prior.name}: auto needs {AUTO_AT} iterations to read the noise; this "
+                        f"{driver.iterations}-iteration solve used the rule's start {prior.relative:.3g}")

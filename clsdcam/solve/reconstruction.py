@@ -73,6 +73,7 @@ class Reconstruction:
         weights = AutoWeights(priors)
         phases = Phases(driver, spaces, s, iters or s.iters, (weights,), self._fit_rule(driver, stop_at_fit))
         reason = phases.run(start.warm, start.basis, start.core)
+        weights.unchosen(driver)
         driver.note(phases.refreshes_line())
         field = phases.problem.solution(driver.x)
         out = self._result(field, driver.history, reason, priors, driver.step, work.report)
