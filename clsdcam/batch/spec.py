@@ -11,9 +11,10 @@ from ..solve.settings import COLD_ITERS, Settings
 
 @dataclass(frozen=True)
 class BatchSpec:
-    """Everything a worker needs to reconstruct any chunk (picklable). ``settings.iters`` is the budget of a
-    warm-started frame, ``cold_iters`` (None: max(COLD_ITERS, settings.iters)) that of a cold start (a chunk's
-    first frame, a frame after a failed one); without ``warm_start`` every frame gets ``settings.iters``."""
+    """Everything a worker needs to reconstruct any chunk (picklable). ``settings.budget`` is the budget of a
+    warm-started frame, ``cold_iters`` (None: max(COLD_ITERS, settings.budget)) that of a cold start (a chunk's
+    first frame, a frame after a failed one); without ``warm_start`` every frame gets ``settings.budget``. With
+    ``--iters auto`` every frame also stops when converged (:mod:`clsdcam.solve.convergence`)."""
 
     frames: tuple[str, ...]
     calibration: str
@@ -32,11 +33,11 @@ class BatchSpec:
                              "sensor's bad pixels with dead_pixels instead)")
 
     def budget(self, warm: bool) -> int:
-        """Iterations of a frame: ``settings.iters`` when warm-started (or without warm starts at all), else the
+        """Iterations of a frame at most: ``settings.budget`` when warm-started (or without warm starts at all), else the
         cold budget."""
         if warm or not self.warm_start:
-            return self.settings.iters
-        return self.cold_iters or max(COLD_ITERS, self.settings.iters)
+            return self.settings.budget
+        return self.cold_iters or max(COLD_ITERS, self.settings.budget)
 
 
 @dataclass

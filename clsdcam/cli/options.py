@@ -97,6 +97,11 @@ positive_int = integer_at_least(1)
 non_negative_int = integer_at_least(0)
 
 
+def iterations(text: str):
+    """An argparse type for ``--iters``: ``auto`` or an integer ≥ 1."""
+    return text if text == "auto" else positive_int(text)
+
+
 def weight(auto: bool):
     """An argparse type: a number, or ``auto`` when the prior has an auto rule."""
     def parse(text: str):
@@ -171,12 +176,18 @@ def add_solver_options(p: argparse.ArgumentParser):
     """The solver's options: iterations, one weight per prior of the table, stopping rules, skips, backend."""
     from ..algorithms import ALGORITHMS
     from ..solve.priors import PRIORS
-    from ..solve.settings import DEFAULT_ITERS
+    from ..solve.settings import AUTO_CAP, CONVERGE, DEFAULT_ITERS
 
-    p.add_argument("--iters", type=positive_int, default=DEFAULT_ITERS, help=f"iterations (default {DEFAULT_ITERS})")
-    p.add_argument("--algorithm", default="fista", choices=tuple(ALGORITHMS),
-                   help="the algorithm the solve runs (default fista: FISTA with adaptive restart; admm: ADMM with "
-                        "closed-form steps, fewer iterations, NumPy and band space only, --tv and --l1 only)")
+    p.add_argument("--iters", type=iterations, default=DEFAULT_ITERS, metavar="N|auto",
+                   help=f"iterations: a number, or auto (the default): until the estimated distance to the converged "
+                        f"cube is below --converge, at most {AUTO_CAP}")
+    p.add_argument("--converge", type=number, default=CONVERGE, metavar="D",
+                   help=f"with --iters auto: stop when the estimated relative distance to the converged cube is below "
+                        f"D (default {CONVERGE:g}; docs/convergence.md)")
+    p.add_argument("--algorithm", default="auto", choices=("auto",) + tuple(ALGORITHMS),
+                   help="the algorithm the solve runs: fista (FISTA with adaptive restart), admm (ADMM with "
+                        "closed-form steps: fewer iterations, band space only, --tv and --l1 only), or auto (the "
+                        "default): admm with --iters auto where it can run, else fista")
     for row in PRIORS:
         p.add_argument(row.flag, dest=row.name, type=weight(row.prior.auto_weight is not None), default=row.default,
                        metavar="W|auto" if row.prior.auto_weight else "W", help=f"{row.help} (default {row.default})")
@@ -278,7 +289,7 @@ def settings_from(args):
     from ..solve.priors import PRIORS
     from ..solve.settings import Settings
 
-    return Settings(iters=args.iters, algorithm=args.algorithm, tv_weights=args.tv_weights, tol=args.tol, plateau=args.plateau, rank=args.rank,
+    return Settings(iters=args.iters, converge=args.converge, algorithm=args.algorithm, tv_weights=args.tv_weights, tol=args.tol, plateau=args.plateau, rank=args.rank,
                     subspace=args.subspace, support_field=args.support_field, skip=not args.no_skip, dtype=args.dtype,
                     full_field=getattr(args, "full_field", False),
                     **{row.name: getattr(args, row.name) for row in PRIORS})

@@ -21,7 +21,7 @@ def solve(args, calibration, measurement, snapshots=()):
     if not args.quiet:
         print(f"backend {be.name} on {be.device_name} ({be.path} path, FFT: {be.fft_engine}); field "
               f"{shape_text(solver.model.cube_shape)}; L = {solver.lipschitz:.4g}", file=sys.stderr)
-    with ProgressBar(args.iters, args.quiet) as progress:
+    with ProgressBar(solver.settings.budget, args.quiet) as progress:
         result = solver.solve(measurement, progress=progress, snapshots=snapshots)
     if result.stop_reason == "interrupted" and not args.save_on_interrupt:
         raise KeyboardInterrupt
@@ -36,7 +36,7 @@ def chosen_backend(args) -> str:
     from ..algorithms import ALGORITHMS
     from ..backends import resolve_backend
 
-    algorithm = getattr(args, "algorithm", "fista")
+    algorithm = settings_from(args).algorithm if hasattr(args, "algorithm") else "fista"    # "auto" resolved
     runs_on = ALGORITHMS[algorithm].backends
     if args.backend == "auto" and runs_on is not None and "opencl" not in runs_on:
         name, why = "numpy", f"--algorithm {algorithm} runs on NumPy"
@@ -99,6 +99,8 @@ class ProgressBar:
     def update(self, record: dict):
         self.record = record
         fields = {"data": f"{record['data']:.4g}", "change": f"{record['change']:.2e}", "rank": record["rank"]}
+        if "distance" in record:        # --iters auto: the estimated distance to the limit (∞ until it is known)
+            fields["distance"] = f"{record['distance']:.1e}"
         if record["objective"] == record["objective"]:  # not NaN
             self.last_objective = f"{record['objective']:.5g}"
         fields["objective"] = self.last_objective

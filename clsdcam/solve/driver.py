@@ -13,9 +13,10 @@ around the loop makes (:meth:`Driver.note`: a skip taken, a space entered, a wei
 does between iterations (:meth:`Driver.work`: a subspace's power iteration, a full-step check); the solve's are
 in :mod:`clsdcam.solve.tracker`.
 
-It stops after ``iters`` iterations, when the relative change ‖x⁺ − x‖/‖x⁺‖ falls below ``tol``
-("tolerance"), when the objective fell by less than ``plateau`` (relative) between two checkpoints ("plateau"),
-when ``should_stop`` says so, on Ctrl-C ("interrupted", returning the best iterate), or after too many back-offs
+It stops after ``iters`` iterations, when the estimated relative distance to the limit
+(:mod:`clsdcam.solve.convergence`, kept in the records as ``distance``) falls below ``converge`` ("converged"), when
+the relative change ‖x⁺ − x‖/‖x⁺‖ falls below ``tol`` ("tolerance"), when the objective fell by less than
+``plateau`` (relative) between two checkpoints ("plateau"), when ``should_stop`` says so, on Ctrl-C ("interrupted", returning the best iterate), or after too many back-offs
 ("diverged"), and says why. Between phases the caller may move the algorithm to another space (:meth:`Driver.move`)
 or change the objective (:meth:`Driver.rescore`); :func:`minimize` is one phase from x0.
 """
@@ -28,12 +29,14 @@ from typing import Any, Callable, Iterable
 
 from ..algorithms import ALGORITHMS
 from .checkpoints import Checkpoints
+from .convergence import DistanceEstimate
 
 
 @dataclass(frozen=True)
 class Rules:
     """When to stop, how often to check the objective, whether to restart momentum (algorithms that have it)."""
 
+    converge: float = 0.0
     tol: float = 0.0
     plateau: float = 0.0
     objective_every: int = 10
@@ -65,6 +68,7 @@ class Driver:
         self.rules = rules
         self.history: list[dict] = []
         self.checkpoints = Checkpoints(algorithm, objective, algorithm.backend.dtype)
+        self.estimate = DistanceEstimate()
         self.observers = list(observers)
 
     def observe(self, observer: Observer):
@@ -116,10 +120,12 @@ class Driver:
         self.algorithm.move(mapping)
         self.algorithm.step = step
         self.checkpoints.enter(objective, evaluate)
+        self.estimate.restart()
 
     def rescore(self, objective):
         """Go on from the same iterates, momentum and step under another objective (e.g. auto weights chosen)."""
         self.checkpoints.rescore(objective)
+        self.estimate.restart()
 
     def _iteration(self, problem, last: bool) -> dict:
         k = self.iterations + 1
@@ -131,6 +137,9 @@ class Driver:
             record.update(self.checkpoints.check())
             record["transforms"] += problem.transforms() // 2      # F(x): one forward
         record["objective"] = record.get("objective", math.nan)
+        if self.rules.converge > 0:
+            self.estimate.add(record["change"])
+            record["distance"] = self.estimate.distance
         record["seconds"] = time.perf_counter() - self._start
         return record
 
@@ -138,6 +147,8 @@ class Driver:
         rules = self.rules
         if self.checkpoints.diverged:
             return "diverged"
+        if rules.converge > 0 and record["distance"] < rules.converge:
+            return "converged"
         if rules.tol > 0 and not record.get("rollback") and record["change"] < rules.tol:
             return "tolerance"
         if rules.plateau > 0 and math.isfinite(record["objective"]) and not record.get("rollback"):

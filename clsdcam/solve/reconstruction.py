@@ -60,7 +60,7 @@ class Reconstruction:
         start.apply_weights(priors)
         spaces = Spaces(self.model, self.b, priors, solver.calibration.filters, solver.lipschitz,
                         solver.last_lipschitz, solver.shared)
-        rules = Rules(tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart)
+        rules = Rules(converge=s.stop_distance, tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart)
         algorithm = ALGORITHMS[s.algorithm](be, start.field, start.step_factor / solver.lipschitz, rules)
         if start.carry is not None:
             algorithm.resume(*start.carry)
@@ -71,7 +71,7 @@ class Reconstruction:
         off = [row.name for row in PRIORS if row.name not in {p.name for p in priors}]
         driver.note(field_line(solver.geometry), self._bands_line(), terms_line(off))
         weights = AutoWeights(priors)
-        phases = Phases(driver, spaces, s, iters or s.iters, (weights,), self._fit_rule(driver, stop_at_fit))
+        phases = Phases(driver, spaces, s, iters or s.budget, (weights,), self._fit_rule(driver, stop_at_fit))
         reason = phases.run(start.warm, start.basis, start.core)
         weights.unchosen(driver)
         driver.note(phases.refreshes_line())
@@ -80,6 +80,8 @@ class Reconstruction:
         out.attrs.update({f"{p.name}_chosen": p.relative for p in priors}, **weights.chosen)
         fit, structure = self._residual_figures(phases.problem, driver.x)
         out.attrs.update(relative_residual=fit, residual_to_noise=structure)
+        if rules.converge:
+            out.attrs["distance_estimate"] = driver.history[-1]["distance"] if driver.history else 0.0
         out.snapshots = copies.kept
         carry = algorithm.carry()
         factor = self.units.cube_factor

@@ -15,7 +15,9 @@ from ..algorithms import ALGORITHMS
 from ..errors import InputError
 from .priors import AUTO, PRIORS
 
-DEFAULT_ITERS = 300
+DEFAULT_ITERS = AUTO  # iterate until converged (``converge``), at most AUTO_CAP
+AUTO_CAP = 3000       # the most iterations an automatic stop runs (the panel's references' length, docs/convergence.md)
+CONVERGE = 0.03       # the estimated relative distance to the limit an automatic stop stops at (docs/convergence.md)
 COLD_ITERS = 40     # a stream's cold start (a batch chunk's first frame): what reached a cold solve's accuracy (with --subspace, docs/batch.md)
 DEFAULT_TOL = 0.0
 
@@ -24,8 +26,9 @@ DEFAULT_TOL = 0.0
 class SolverSettings:
     """The fields that are not prior weights."""
 
-    iters: int = DEFAULT_ITERS
-    algorithm: str = "fista"       # a name of clsdcam.algorithms.ALGORITHMS
+    iters: int | str = DEFAULT_ITERS   # a count, or "auto": until converged, at most AUTO_CAP
+    converge: float = CONVERGE     # with iters "auto": stop when the estimated distance to the limit is below this
+    algorithm: str = "auto"        # a name of clsdcam.algorithms.ALGORITHMS, or "auto" (resolved on construction)
     tv_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)  # x, y, λ
     tol: float = DEFAULT_TOL
     plateau: float = 0.0           # stop when F fell by less than this (relative) between checkpoints
@@ -41,11 +44,15 @@ class SolverSettings:
 
     def __post_init__(self):
         object.__setattr__(self, "tv_weights", tuple(float(w) for w in self.tv_weights))
-        _require(_is_int(self.iters) and self.iters >= 1, f"--iters {self.iters}: must be an integer ≥ 1")
+        if self.algorithm == AUTO:
+            object.__setattr__(self, "algorithm", self._auto_algorithm())
+        _require(self.iters == AUTO or (_is_int(self.iters) and self.iters >= 1),
+                 f"--iters {self.iters}: must be auto or an integer ≥ 1")
         _require(self.algorithm in ALGORITHMS,
                  f"--algorithm {self.algorithm!r}: expected one of {', '.join(ALGORITHMS)}")
         _require(_finite_nonneg(self.step_scale) and self.step_scale > 0, f"step_scale {self.step_scale}: must be > 0")
         _require(_is_int(self.rank) and self.rank >= 0, f"--rank {self.rank}: must be an integer ≥ 0")
+        _require(_finite_nonneg(self.converge) and self.converge > 0, f"--converge {self.converge}: must be > 0")
         for name in ("tol", "plateau"):
             value = getattr(self, name)
             _require(_finite_nonneg(value), f"--{name} {value}: must be a finite number ≥ 0")
@@ -60,6 +67,24 @@ class SolverSettings:
                  f"--tv-weights {self.tv_weights}: expected three finite numbers ≥ 0 (x, y, λ)")
         _require(self.objective_every >= 1, f"objective_every {self.objective_every}: must be ≥ 1")
 
+    @property
+    def budget(self) -> int:
+        """The most iterations a solve runs: ``iters``, or AUTO_CAP when it is "auto"."""
+        return AUTO_CAP if self.iters == AUTO else self.iters
+
+    @property
+    def stop_distance(self) -> float:
+        """The driver's ``converge`` rule: ``converge`` when ``iters`` is "auto", else 0 (off)."""
+        return self.converge if self.iters == AUTO else 0.0
+
+    def _auto_algorithm(self) -> str:
+        """``--algorithm auto``: ADMM for a solve run until converged (``--iters auto``) that ADMM can run (band space,
+        its priors), for it reaches the model's answer in fewer iterations and seconds (docs/convergence.md); FISTA
+        for a fixed number of iterations (its path is the better one at a budget) and for everything else."""
+        admm = ALGORITHMS["admm"]
+        own = all(getattr(self, row.name) == 0 or row.name in admm.priors for row in PRIORS)
+        converging = self.iters == AUTO and not (self.subspace or self.rank)
+        return "admm" if converging and own else "fista"
 
     def _check_algorithm_limits(self, algorithm):
         """What the algorithm declares it cannot do yet (:mod:`clsdcam.algorithms.base`): a subspace, other priors."""

@@ -1,0 +1,60 @@
+"""How far the iterate still is from its limit, from the iterations' own steps (no truth, no extra arrays): the
+stopping rule of ``--iters auto``.
+
+With c_i = ‖x_{i+1} − x_i‖/‖x_{i+1}‖ (every record's ``change``), the steps of window j (W iterations) sum to
+
+    S_j = Σ_{i in window j} c_i  ≥  ‖x_end(j) − x_start(j)‖/‖x‖.
+
+A sequence that converges linearly, ‖x_i − x*‖ ≈ C·ρ^i, has windows that shrink by q = ρ^W each, so the road left
+is the geometric tail
+
+    d_j = S_j · q/(1 − q),      q = max(S_j/S_{j−1}, S_{j−1}/S_{j−2}, S_{j−2}/S_{j−3})    (the slowest of the last three)
+
+an estimate of ‖x − x*‖/‖x*‖ (the triangle inequality makes S_j an over-estimate of the window's net move when the
+momentum zig-zags: the estimate errs towards more iterations). While the windows do not shrink (q ≥ 1: a new
+weight, FISTA's momentum building up again after a restart) the distance is unknown (∞) and the solve goes on; the
+slowest of three ratios keeps one window cut short by a restart from passing for convergence. The solve stops at the end of the
+first window whose d_j is below the tolerance.
+"""
+from __future__ import annotations
+
+import math
+
+WINDOW = 25         # iterations a window sums
+RATIOS = 3          # window-to-window ratios the rate is judged by (the slowest)
+
+
+class DistanceEstimate:
+    """The running estimate of the relative distance to the limit (see the module docstring)."""
+
+    def __init__(self, window: int = WINDOW):
+        self.window = window
+        self.sums: list[float] = []     # S_j of the closed windows
+        self.open = 0.0                 # the steps of the window being summed
+        self.count = 0
+        self.distance = math.inf        # the last closed window's d_j
+
+    def add(self, change: float) -> bool:
+        """Count one iteration's relative step; True when it closed a window (``distance`` is new)."""
+        self.open += change
+        self.count += 1
+        if self.count < self.window:
+            return False
+        self.sums.append(self.open)
+        self.open, self.count = 0.0, 0
+        self.distance = self._tail()
+        return True
+
+    def restart(self) -> None:
+        """Forget the windows (the objective changed: the steps before belong to another limit)."""
+        self.sums.clear()
+        self.open, self.count, self.distance = 0.0, 0, math.inf
+
+    def _tail(self) -> float:
+        last = self.sums[-RATIOS - 1:]
+        if len(last) <= RATIOS or not all(math.isfinite(s) for s in last):
+            return math.inf
+        if last[-1] == 0.0:
+            return 0.0
+        q = max(after / before if before > 0 else math.inf for before, after in zip(last, last[1:]))
+        return last[-1] * q / (1.0 - q) if q < 1.0 else math.inf

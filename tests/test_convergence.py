@@ -1,0 +1,61 @@
+"""The distance estimate of ``--iters auto`` (clsdcam.solve.convergence) and the driver's "converged" stop."""
+
+import math
+
+import numpy as np
+import pytest
+
+from clsdcam.solve.convergence import WINDOW, DistanceEstimate
+from test_driver import Quadratic
+
+
+def test_a_geometric_sequence_of_steps_gives_its_exact_tail():
+    """c_i = ρ^i: after window j the steps still to come sum to S_j·q/(1 − q), q = ρ^W."""
+    rho, estimate = 0.97, DistanceEstimate()
+    changes = rho ** np.arange(10 * WINDOW)
+    closed = [i for i, c in enumerate(changes) if estimate.add(float(c))]
+    assert closed == [WINDOW * j - 1 for j in range(1, 11)]
+    assert estimate.distance == pytest.approx(changes[10 * WINDOW - 1] * rho / (1 - rho), rel=1e-9)
+
+
+def test_unknown_until_three_windows_and_while_the_steps_do_not_shrink():
+    estimate = DistanceEstimate()
+    for i in range(2 * WINDOW):
+        estimate.add(1.0 / (i + 1))
+    assert estimate.distance == math.inf                 # two windows: no ratio to trust yet
+    for _ in range(WINDOW):
+        estimate.add(0.5)                                # a window as long as the one before: q ≥ 1
+    assert estimate.distance == math.inf
+
+
+def test_the_slower_of_the_last_two_ratios_is_trusted():
+    estimate = DistanceEstimate(window=1)
+    for change in (1.0, 0.5, 0.05):                      # ratios 0.5, then 0.1: the tail is judged by 0.5
+        estimate.add(change)
+    assert estimate.distance == pytest.approx(0.05 * 0.5 / 0.5)
+
+
+def test_restart_forgets_the_windows():
+    estimate = DistanceEstimate(window=1)
+    for change in (1.0, 0.5, 0.25):
+        estimate.add(change)
+    assert math.isfinite(estimate.distance)
+    estimate.restart()
+    assert estimate.distance == math.inf and estimate.add(0.1) and estimate.distance == math.inf
+
+
+@pytest.mark.parametrize("converge", [1e-3, 1e-5])
+def test_the_driver_stops_converged_within_the_tolerance_of_the_limit(converge):
+    """On an ill-conditioned quadratic FISTA (with restart) stops by itself, at a true relative distance to x* of at
+    most the tolerance, and the records carry the estimate."""
+    problem = Quadratic(3, m=40, n=40, mu=1e-2)
+    result = problem.run(iters=20000, converge=converge)
+    assert result.stop_reason == "converged" and result.iterations < 20000
+    true = np.linalg.norm(result.x - problem.exact) / np.linalg.norm(problem.exact)
+    assert true <= converge and result.history[-1]["distance"] < converge
+    assert all("distance" in r for r in result.history)
+
+
+def test_without_the_rule_no_record_carries_a_distance():
+    result = Quadratic(1).run(iters=50)
+    assert result.stop_reason == "iterations" and not any("distance" in r for r in result.history)

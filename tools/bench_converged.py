@@ -1,0 +1,225 @@
+#!/usr/bin/env python3
+"""Converged by default: the default's final cube against the model's own answer, and its time against today's
+300 FISTA iterations, on a fresh randomised panel (the scenes of :mod:`bench_panel`).
+
+    python tools/bench_converged.py --size 128x160 --bands 64 --scenes 20 --out converged
+
+Per scene, in one process and one after another:
+
+* **today**: FISTA, 300 iterations, ``--tv auto`` (the default before ``--iters auto``);
+* **default**: the default settings as they are now (whatever ``clsdcam reconstruct`` runs without options); the
+  weight τ its ``--tv auto`` chooses is the scene's weight;
+* **the reference**, the model's own answer at τ: FISTA and ADMM each run ``--reference-iters`` in band space, and
+  for each metric the better final is taken (PSNR the higher, mean spectral angle the lower). A reference depends
+  only on the scene's seed, size and τ, so it is cached under ``--cache`` (the first 20-scene panel costs about
+  two hours on a 2-core machine; a replay costs the two short solves).
+
+The rules (issue "Converged by default"), each scene's margins positive when it holds:
+
+* **answer**: PSNR ≥ reference − 0.2 dB and angle ≤ reference + 0.5°;
+* **time**: default's seconds / today's, median ≤ 1.0 and worst ≤ 2.0;
+* **no regression**: not (PSNR below today's by more than 0.2 dB *and* angle above today's by more than 0.5°).
+
+Also reported: FISTA's own seconds to come within 0.2 dB and 0.5° of the reference (from the reference run's
+snapshots) over the default's, the speed-up. Writes ``converged.json`` (after every scene), ``converged.md`` and
+``converged.png`` (every scene's PSNR and angle against seconds: both references' curves, today and the default as
+points, the reference's band). ``--seed`` replays a panel, ``--only I`` one scene of it.
+"""
+from __future__ import annotations
+
+import hashlib
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text
+from bench_panel import panel_kinds, panel_scene, scene_plan
+from clsdcam.metrics import psnr, spectral_angle
+from clsdcam.render import new_figure
+from clsdcam.solve.solver import Settings, Solver
+
+PSNR_DB, ANGLE_DEG = 0.2, 0.5           # rule 2's tolerance (and rule 4's)
+TIME_MEDIAN, TIME_WORST = 1.0, 2.0      # rule 3
+TODAY = {"iters": 300, "algorithm": "fista"}      # today's default: FISTA, 300 iterations, --tv auto
+REFERENCE_ALGORITHMS = ("fista", "admm")
+HISTORY = ("change", "data", "objective", "seconds")   # per-iteration numbers a cached reference keeps
+
+
+def reference_marks(iters: int) -> list[int]:
+    """Where a reference run's cube is scored: about 24 marks, log-spaced from 10 to ``iters``."""
+    return sorted({int(round(m)) for m in np.geomspace(10, iters, 24)})
+
+
+def timed_solve(sim, fields: dict, marks=()) -> tuple:
+    """(result, seconds) of one solve on :attr:`Where.backend`, snapshots at ``marks``."""
+    solver = Solver(sim.calibration, backend=Where.backend, settings=Settings(**fields))
+    start = time.perf_counter()
+    result = solver.solve(sim.measurement, snapshots=marks)
+    return result, time.perf_counter() - start
+
+
+def final_point(sim, result, seconds: float) -> dict:
+    return {"psnr": psnr(result.cube, sim.truth), "angle": spectral_angle(result.cube, sim.truth),
+            "seconds": seconds, "iterations": result.iterations, "stop_reason": result.stop_reason,
+            "estimate": result.attrs.get("distance_estimate")}
+
+
+def curve(sim, result) -> list[dict]:
+    """The run's PSNR, angle and seconds at its snapshots (seconds from its history)."""
+    seconds = {r["iteration"]: r["seconds"] for r in result.history}
+    return [{"iteration": k, "psnr": psnr(cube, sim.truth), "angle": spectral_angle(cube, sim.truth),
+             "seconds": seconds[k]} for k, cube in sorted(result.snapshots.items())]
+
+
+def reference_run(sim, plan: dict, tau: float, algorithm: str, iters: int, cache: Path) -> dict:
+    """One reference run's curve (cached by seed, size, τ, algorithm and iterations)."""
+    key = f"{plan['kind']}|{plan['level']}|{plan['seed']}|{sim.truth.shape}|{tau!r}|{algorithm}|{iters}"
+    path = cache / f"{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
+    if path.exists():
+        stored = np.load(path, allow_pickle=False)
+        return {"points": [dict(zip(stored["names"], map(float, row))) for row in stored["points"]]}
+    result, _ = timed_solve(sim, {"tv": tau, "iters": iters, "algorithm": algorithm}, reference_marks(iters))
+    points = curve(sim, result)
+    names = list(points[0])
+    np.savez(path, names=names, points=np.array([[p[n] for n in names] for p in points]), key=key,
+             **{f"history_{n}": [r[n] for r in result.history] for n in HISTORY}, cube=result.cube)
+    return {"points": points}
+
+
+def reference(runs: dict) -> dict:
+    """The model's own answer: the better final of the reference runs, metric by metric."""
+    finals = [run["points"][-1] for run in runs.values()]
+    return {"psnr": max(p["psnr"] for p in finals), "angle": min(p["angle"] for p in finals)}
+
+
+def time_within(points: list[dict], ref: dict) -> float | None:
+    """Seconds of the first scored mark within the answer's tolerance of ``ref``, or None."""
+    for p in points:
+        if p["psnr"] >= ref["psnr"] - PSNR_DB and p["angle"] <= ref["angle"] + ANGLE_DEG:
+            return p["seconds"]
+    return None
+
+
+def margins(scene: dict) -> dict:
+    """Every rule's margin for one scene (positive: it holds)."""
+    ref, today, default = scene["reference"], scene["today"], scene["default"]
+    fista_time = time_within(scene["references"]["fista"]["points"], ref)
+    return {"answer_db": default["psnr"] - ref["psnr"] + PSNR_DB,
+            "answer_deg": ref["angle"] + ANGLE_DEG - default["angle"],
+            "time_ratio": default["seconds"] / today["seconds"],
+            "regression": max(default["psnr"] - today["psnr"] + PSNR_DB, today["angle"] + ANGLE_DEG - default["angle"]),
+            "speedup": None if fista_time is None else fista_time / default["seconds"]}
+
+
+def run_scene(plan: dict, shape, bands: int, iters: int, cache: Path) -> dict:
+    sim = panel_scene(plan, shape, bands)
+    today_result, today_seconds = timed_solve(sim, TODAY)
+    default_result, default_seconds = timed_solve(sim, {})
+    tau = float(default_result.attrs["tv_chosen"])
+    runs = {a: reference_run(sim, plan, tau, a, iters, cache) for a in REFERENCE_ALGORITHMS}
+    scene = {**plan, "tv": tau, "today": final_point(sim, today_result, today_seconds),
+             "default": final_point(sim, default_result, default_seconds), "references": runs,
+             "reference": reference(runs)}
+    return {**scene, "margins": margins(scene)}
+
+
+def summary(results: dict) -> list[str]:
+    scenes = results["scenes"]
+    ratios = [s["margins"]["time_ratio"] for s in scenes]
+    answer = sum(min(s["margins"]["answer_db"], s["margins"]["answer_deg"]) >= 0 for s in scenes)
+    kept = sum(s["margins"]["regression"] >= 0 for s in scenes)
+    speedups = [s["margins"]["speedup"] for s in scenes if s["margins"]["speedup"] is not None]
+    return [f"- answer (within {PSNR_DB} dB and {ANGLE_DEG}° of the reference): {answer} of {len(scenes)} scenes",
+            f"- time against today's 300 FISTA iterations: median {np.median(ratios):.2f}×, worst {max(ratios):.2f}× "
+            f"(rule: ≤ {TIME_MEDIAN}×, ≤ {TIME_WORST}×)",
+            f"- no regression against today: {kept} of {len(scenes)} scenes",
+            f"- FISTA's own time to the reference's tolerance over the default's: median "
+            + (f"{np.median(speedups):.2f}× ({len(speedups)} scenes where FISTA got there)" if speedups else "–")]
+
+
+def scene_rows(results: dict) -> list[str]:
+    rows = ["| # | kind | noise | τ | reference | today (300 it) | default | iters, stop | time × | answer margin |",
+            "|---:|---|---|---:|---|---|---|---|---:|---|"]
+    for s in results["scenes"]:
+        m, d = s["margins"], s["default"]
+        rows.append(f"| {s['index']} | {s['kind']} | {s['level']} | {s['tv']:.3g} | {pair(s['reference'])} | "
+                    f"{pair(s['today'])} | {pair(d)} | {d['iterations']}, {d['stop_reason']} | "
+                    f"{m['time_ratio']:.2f} | {m['answer_db']:+.2f} dB / {m['answer_deg']:+.2f}° |")
+    return rows
+
+
+def pair(point: dict) -> str:
+    return f"{point['psnr']:.2f} dB / {point['angle']:.2f}°"
+
+
+def markdown(results: dict) -> str:
+    head = (f"Seed {results['seed']}, {results['size']}×{results['bands']}, references: FISTA and ADMM "
+            f"{results['reference_iters']} iterations, backend {results['backend']}.")
+    return "\n".join([head, ""] + summary(results) + ["", "Every scene (PSNR / mean spectral angle):", ""]
+                     + scene_rows(results))
+
+
+def plot(results: dict, path: Path, per_row: int = 5):
+    """Every scene's PSNR (upper) and angle (lower) against seconds: the reference runs' curves, today's and the
+    default's finals as points, the reference's tolerance as a band."""
+    scenes = results["scenes"]
+    columns, rows = min(len(scenes), per_row), -(-len(scenes) // per_row)
+    fig = new_figure(figsize=(3.2 * columns, 4.6 * rows))
+    axes = np.array(fig.subplots(2 * rows, columns, squeeze=False))
+    for i, scene in enumerate(scenes):
+        pair_axes = axes[2 * (i // per_row), i % per_row], axes[2 * (i // per_row) + 1, i % per_row]
+        for ax, metric, sign in zip(pair_axes, ("psnr", "angle"), (-1, 1)):
+            for name, run in scene["references"].items():
+                ax.plot([p["seconds"] for p in run["points"]], [p[metric] for p in run["points"]], label=name)
+            ref = scene["reference"][metric]
+            ax.axhspan(ref, ref + sign * (PSNR_DB if metric == "psnr" else ANGLE_DEG), color="0.85", zorder=0)
+            for name, marker in (("today", "s"), ("default", "*")):
+                ax.plot(scene[name]["seconds"], scene[name][metric], marker, ms=8, label=name, color="k")
+            ax.set_xscale("log")
+        pair_axes[0].set(title=f"{scene['index']}: {scene['kind']}, {scene['level']}", ylabel="PSNR (dB)")
+        pair_axes[1].set(xlabel="seconds", ylabel="mean spectral angle (°)")
+    for i in range(len(scenes), rows * columns):
+        axes[2 * (i // per_row), i % per_row].set_visible(False)
+        axes[2 * (i // per_row) + 1, i % per_row].set_visible(False)
+    axes[0, 0].legend(fontsize=7, framealpha=0.5)
+    fig.suptitle(f"Seed {results['seed']}, {results['size']}×{results['bands']}: error against time "
+                 "(grey: within the reference's tolerance)", fontsize=10)
+    fig.savefig(path, dpi=90)
+
+
+def main(argv=None) -> int:
+    parser = panel_parser(__doc__.splitlines()[0], "converged", named_scenes=False)
+    parser.set_defaults(size=(128, 160))
+    parser.add_argument("--scenes", type=int, default=20, help="random scenes (kinds in turn; default 20)")
+    parser.add_argument("--seed", type=int, default=None, help="replay a panel (default: fresh entropy)")
+    parser.add_argument("--only", type=int, default=None, metavar="I", help="replay scene I of the panel alone")
+    parser.add_argument("--reference-iters", type=int, default=3000, help="each reference run's iterations")
+    parser.add_argument("--cache", default="converged-cache", help="folder of cached reference runs")
+    add_backend_option(parser)
+    args = parser.parse_args(argv)
+    Where.use(args.backend)
+    if args.only is not None and not 0 <= args.only < args.scenes:
+        parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
+    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
+    out, cache = Path(args.out), Path(args.cache)
+    out.mkdir(parents=True, exist_ok=True)
+    cache.mkdir(parents=True, exist_ok=True)
+    results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "backend": args.backend,
+               "reference_iters": args.reference_iters, "scenes": []}
+    print(f"panel seed {seed}", file=sys.stderr, flush=True)
+    for i, plan in enumerate(scene_plan(args.scenes, seed, panel_kinds())):
+        if args.only is not None and i != args.only:
+            continue
+        results["scenes"].append({"index": i, **run_scene(plan, args.size, args.bands, args.reference_iters,
+                                                          cache)})
+        print(f"  scene {i + 1}/{args.scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
+        save_json(out, "converged", results)
+    report(out, "converged", results, markdown(results))
+    plot(results, out / "converged.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
