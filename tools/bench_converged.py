@@ -23,7 +23,8 @@ The rules (issue "Converged by default"), each scene's margins positive when it 
 Also reported: FISTA's own seconds to come within 0.2 dB and 0.5° of the reference (from the reference run's
 snapshots) over the default's, the speed-up. Writes ``converged.json`` (after every scene), ``converged.md`` and
 ``converged.png`` (every scene's PSNR and angle against seconds: both references' curves, today and the default as
-points, the reference's band). ``--seed`` replays a panel, ``--only I`` one scene of it.
+points, the reference's band). ``--seed`` replays a panel, ``--only I,J`` some scenes of it; ``--weight-from today`` takes the weight
+from today's run instead, and ``--replay`` replays the stop at other tolerances on the cached reference runs.
 """
 from __future__ import annotations
 
@@ -38,6 +39,8 @@ from bench_accuracy import Where, add_backend_option, panel_parser, report, save
 from bench_panel import panel_kinds, panel_scene, scene_plan
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
+from clsdcam.solve.auto_weights import AUTO_AT
+from clsdcam.solve.convergence import DistanceEstimate
 from clsdcam.solve.solver import Settings, Solver
 
 PSNR_DB, ANGLE_DEG = 0.2, 0.5           # rule 2's tolerance (and rule 4's)
@@ -79,13 +82,14 @@ def reference_run(sim, plan: dict, tau: float, algorithm: str, iters: int, cache
     path = cache / f"{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
     if path.exists():
         stored = np.load(path, allow_pickle=False)
-        return {"points": [dict(zip(stored["names"], map(float, row))) for row in stored["points"]]}
+        return {"points": [dict(zip(stored["names"], map(float, row))) for row in stored["points"]],
+                "change": stored["history_change"].tolist()}
     result, _ = timed_solve(sim, {"tv": tau, "iters": iters, "algorithm": algorithm}, reference_marks(iters))
     points = curve(sim, result)
     names = list(points[0])
     np.savez(path, names=names, points=np.array([[p[n] for n in names] for p in points]), key=key,
              **{f"history_{n}": [r[n] for r in result.history] for n in HISTORY}, cube=result.cube)
-    return {"points": points}
+    return {"points": points, "change": [r["change"] for r in result.history]}
 
 
 def reference(runs: dict) -> dict:
@@ -94,11 +98,31 @@ def reference(runs: dict) -> dict:
     return {"psnr": max(p["psnr"] for p in finals), "angle": min(p["angle"] for p in finals)}
 
 
+def first_within(points: list[dict], ref: dict) -> dict | None:
+    """The first scored mark within the answer's tolerance of ``ref``, or None."""
+    return next((p for p in points if p["psnr"] >= ref["psnr"] - PSNR_DB and p["angle"] <= ref["angle"] + ANGLE_DEG),
+                None)
+
+
 def time_within(points: list[dict], ref: dict) -> float | None:
     """Seconds of the first scored mark within the answer's tolerance of ``ref``, or None."""
-    for p in points:
-        if p["psnr"] >= ref["psnr"] - PSNR_DB and p["angle"] <= ref["angle"] + ANGLE_DEG:
-            return p["seconds"]
+    found = first_within(points, ref)
+    return None if found is None else found["seconds"]
+
+
+def replay_stop(run: dict, tolerance: float) -> dict | None:
+    """Where ``--converge tolerance`` would have stopped a reference run (its recorded steps replayed through
+    :class:`DistanceEstimate`, forgotten at AUTO_AT as a default solve's are when it chooses the weight), with the
+    PSNR and angle there interpolated between the run's scored marks; None: not within the run."""
+    estimate = DistanceEstimate()
+    for i, change in enumerate(run["change"], start=1):
+        if i == AUTO_AT + 1:
+            estimate.restart()
+        estimate.add(change)
+        if estimate.distance < tolerance:
+            marks = [p["iteration"] for p in run["points"]]
+            return {"iteration": i, **{m: float(np.interp(i, marks, [p[m] for p in run["points"]]))
+                                       for m in ("psnr", "angle")}}
     return None
 
 
@@ -113,11 +137,11 @@ def margins(scene: dict) -> dict:
             "speedup": None if fista_time is None else fista_time / default["seconds"]}
 
 
-def run_scene(plan: dict, shape, bands: int, iters: int, cache: Path) -> dict:
+def run_scene(plan: dict, shape, bands: int, iters: int, cache: Path, weight_from: str = "default") -> dict:
     sim = panel_scene(plan, shape, bands)
     today_result, today_seconds = timed_solve(sim, TODAY)
     default_result, default_seconds = timed_solve(sim, {})
-    tau = float(default_result.attrs["tv_chosen"])
+    tau = float((default_result if weight_from == "default" else today_result).attrs["tv_chosen"])
     runs = {a: reference_run(sim, plan, tau, a, iters, cache) for a in REFERENCE_ALGORITHMS}
     scene = {**plan, "tv": tau, "today": final_point(sim, today_result, today_seconds),
              "default": final_point(sim, default_result, default_seconds), "references": runs,
@@ -158,7 +182,30 @@ def markdown(results: dict) -> str:
     head = (f"Seed {results['seed']}, {results['size']}×{results['bands']}, references: FISTA and ADMM "
             f"{results['reference_iters']} iterations, backend {results['backend']}.")
     return "\n".join([head, ""] + summary(results) + ["", "Every scene (PSNR / mean spectral angle):", ""]
-                     + scene_rows(results))
+                     + scene_rows(results) + ["", "Each reference run: its first scored mark within the rules, and "
+                                              "where the stop would have stopped it at each replayed tolerance "
+                                              "(iteration: PSNR and angle against the reference's):", ""]
+                     + replay_rows(results))
+
+
+def replay_rows(results: dict) -> list[str]:
+    tolerances = results.get("replay", [])
+    rows = ["| # | kind | run | first within | " + " | ".join(f"stop at {t:g}" for t in tolerances) + " |",
+            "|---:|---|---|---|" + "---|" * len(tolerances)]
+    for s in results["scenes"]:
+        ref = s["reference"]
+        for name, run in s["references"].items():
+            first = first_within(run["points"], ref)
+            cells = [stop_cell(replay_stop(run, t), ref) for t in tolerances]
+            rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {name} | "
+                        f"{first['iteration'] if first else '–'} | " + " | ".join(cells) + " |")
+    return rows
+
+
+def stop_cell(stop: dict | None, ref: dict) -> str:
+    if stop is None:
+        return "not within the run"
+    return f"{stop['iteration']}: {stop['psnr'] - ref['psnr']:+.2f} dB / {stop['angle'] - ref['angle']:+.2f}°"
 
 
 def plot(results: dict, path: Path, per_row: int = 5):
@@ -194,26 +241,32 @@ def main(argv=None) -> int:
     parser.set_defaults(size=(128, 160))
     parser.add_argument("--scenes", type=int, default=20, help="random scenes (kinds in turn; default 20)")
     parser.add_argument("--seed", type=int, default=None, help="replay a panel (default: fresh entropy)")
-    parser.add_argument("--only", type=int, default=None, metavar="I", help="replay scene I of the panel alone")
+    parser.add_argument("--only", default="", metavar="I[,J...]", help="replay these scenes of the panel alone")
     parser.add_argument("--reference-iters", type=int, default=3000, help="each reference run's iterations")
     parser.add_argument("--cache", default="converged-cache", help="folder of cached reference runs")
+    parser.add_argument("--weight-from", choices=("default", "today"), default="default",
+                        help="whose --tv auto choice is the scene's weight (default: the default's)")
+    parser.add_argument("--replay", default="0.1,0.05,0.03",
+                        help="tolerances at which to replay the stop on the reference runs (the table's last part)")
     add_backend_option(parser)
     args = parser.parse_args(argv)
     Where.use(args.backend)
-    if args.only is not None and not 0 <= args.only < args.scenes:
+    only = {int(i) for i in args.only.split(",") if i}
+    if not all(0 <= i < args.scenes for i in only):
         parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
     out, cache = Path(args.out), Path(args.cache)
     out.mkdir(parents=True, exist_ok=True)
     cache.mkdir(parents=True, exist_ok=True)
     results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "backend": args.backend,
-               "reference_iters": args.reference_iters, "scenes": []}
+               "reference_iters": args.reference_iters, "weight_from": args.weight_from,
+               "replay": [float(t) for t in args.replay.split(",") if t], "scenes": []}
     print(f"panel seed {seed}", file=sys.stderr, flush=True)
     for i, plan in enumerate(scene_plan(args.scenes, seed, panel_kinds())):
-        if args.only is not None and i != args.only:
+        if only and i not in only:
             continue
         results["scenes"].append({"index": i, **run_scene(plan, args.size, args.bands, args.reference_iters,
-                                                          cache)})
+                                                          cache, args.weight_from)})
         print(f"  scene {i + 1}/{args.scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
         save_json(out, "converged", results)
     report(out, "converged", results, markdown(results))

@@ -97,7 +97,7 @@ positive_int = integer_at_least(1)
 non_negative_int = integer_at_least(0)
 
 
-def iterations(text: str):
+def iteration_count(text: str):
     """An argparse type for ``--iters``: ``auto`` or an integer ≥ 1."""
     return text if text == "auto" else positive_int(text)
 
@@ -178,7 +178,7 @@ def add_solver_options(p: argparse.ArgumentParser):
     from ..solve.priors import PRIORS
     from ..solve.settings import AUTO_CAP, CONVERGE, DEFAULT_ITERS
 
-    p.add_argument("--iters", type=iterations, default=DEFAULT_ITERS, metavar="N|auto",
+    p.add_argument("--iters", type=iteration_count, default=DEFAULT_ITERS, metavar="N|auto",
                    help=f"iterations: a number, or auto (the default): until the estimated distance to the converged "
                         f"cube is below --converge, at most {AUTO_CAP}")
     p.add_argument("--converge", type=number, default=CONVERGE, metavar="D",

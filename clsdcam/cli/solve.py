@@ -134,7 +134,7 @@ def report(result, output: Path):
     seconds = result.history[-1]["seconds"] if result.history else 0.0
     per_iteration = seconds / max(result.iterations, 1)
     print(f"wrote {output}: cube {shape_text(result.cube.shape)}, {result.iterations} iterations "
-          f"(stopped: {result.stop_reason}) in {seconds:.1f} s ({per_iteration:.3f} s/iteration) "
+          f"(stopped: {stop_text(result)}) in {seconds:.1f} s ({per_iteration:.3f} s/iteration) "
           f"on {result.attrs['backend']} [{result.attrs['device']}]")
     print("skipped: " + result.attrs["skips"].replace("\n", "\n         "))
     fit, structure = result.attrs.get("relative_residual", 0.0), result.attrs.get("residual_to_noise", 0.0)
@@ -142,6 +142,16 @@ def report(result, output: Path):
           f"{structure:.2g}× the noise level")
     if fit > POOR_FIT and structure > NOT_NOISE:
         print(poor_fit_warning(result, fit), file=sys.stderr)
+
+
+def stop_text(result) -> str:
+    """Why the solve stopped, and with ``--iters auto`` how close to the converged cube it estimates it is."""
+    distance = result.attrs.get("distance_estimate")
+    if distance is None:
+        return result.stop_reason
+    close = (f"about {100 * distance:.2g}% from the converged cube" if distance < float("inf")
+             else "its distance to the converged cube not yet known")
+    return f"{result.stop_reason}, {close} by its own estimate (--converge {result.attrs['converge']:g})"
 
 
 def poor_fit_warning(result, fit: float) -> str:
