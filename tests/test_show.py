@@ -155,7 +155,7 @@ def test_convergence_plot_draws_each_curve_where_it_was_evaluated():
 
 
 # ---- the demo's quick variant ----------------------------------------------------------------------------
-@pytest.mark.parametrize("words, size, iters", [([], (320, 448), 300), (["--quick"], (160, 224), 100),
+@pytest.mark.parametrize("words, size, iters", [([], (320, 448), "auto"), (["--quick"], (160, 224), 100),
                                                 (["--quick", "--iters", "7"], (160, 224), 7),
                                                 (["--size", "48x64", "--quick"], (48, 64), 100)])
 def test_demo_quick_sets_what_is_not_given(words, size, iters):

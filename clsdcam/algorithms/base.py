@@ -51,6 +51,9 @@ class Algorithm:
     """True: no ``--subspace`` or ``--rank`` (``move`` refuses a change of space)."""
     priors: tuple[str, ...] | None = None
     """The prior names it has a step for; None: every prior."""
+    converges_soonest = False
+    """True: ``--algorithm auto`` runs it for a solve run until converged (``--iters auto``) whenever it can run the
+    settings (docs/convergence.md)."""
     backends: tuple[str, ...] | None = None
     """The backend names it runs on (``--backend auto`` picks NumPy when OpenCL is not one); None: every backend."""
 

@@ -78,25 +78,32 @@ class SolverSettings:
         return self.converge if self.iters == AUTO else 0.0
 
     def _auto_algorithm(self) -> str:
-        """``--algorithm auto``: ADMM for a solve run until converged (``--iters auto``) that ADMM can run (band space,
-        its priors), for it reaches the model's answer in fewer iterations and seconds (docs/convergence.md); FISTA
-        for a fixed number of iterations (its path is the better one at a budget) and for everything else."""
-        admm = ALGORITHMS["admm"]
-        own = all(getattr(self, row.name) == 0 or row.name in admm.priors for row in PRIORS)
-        converging = self.iters == AUTO and not (self.subspace or self.rank)
-        return "admm" if converging and own else "fista"
+        """``--algorithm auto``: for a solve run until converged (``--iters auto``), the first algorithm that declares
+        itself the one to converge with (:attr:`~clsdcam.algorithms.base.Algorithm.converges_soonest`: ADMM, which
+        reaches the model's answer in fewer iterations and seconds, docs/convergence.md) and can run these settings;
+        FISTA for a fixed number of iterations (its path is the better one at a budget) and for everything else."""
+        if self.iters == AUTO:
+            for name, algorithm in ALGORITHMS.items():
+                if algorithm.converges_soonest and self._algorithm_limit(name, algorithm) is None:
+                    return name
+        return "fista"
 
     def _check_algorithm_limits(self, algorithm):
-        """What the algorithm declares it cannot do yet (:mod:`clsdcam.algorithms.base`): a subspace, other priors."""
-        name = self.algorithm
-        _require(not algorithm.band_space_only or not (self.subspace or self.rank),
-                 f"--algorithm {name} runs in band space: drop --subspace and --rank (or use --algorithm fista)")
-        stepped = algorithm.priors
-        if stepped is not None:
-            others = [row.flag for row in PRIORS if row.name not in stepped and getattr(self, row.name) != 0]
-            _require(not others, f"--algorithm {name} has steps for {' and '.join('--' + p for p in stepped)} only, "
-                                 f"not {', '.join(others)} (use --algorithm fista)")
+        _require(self._algorithm_limit(self.algorithm, algorithm) is None,
+                 self._algorithm_limit(self.algorithm, algorithm))
 
+    def _algorithm_limit(self, name: str, algorithm) -> str | None:
+        """What the algorithm declares it cannot do yet (:mod:`clsdcam.algorithms.base`) and these settings ask
+        for (a subspace, other priors), as the message that refuses them; None: nothing."""
+        if algorithm.band_space_only and (self.subspace or self.rank):
+            return f"--algorithm {name} runs in band space: drop --subspace and --rank (or use --algorithm fista)"
+        stepped = algorithm.priors
+        others = [row.flag for row in PRIORS if stepped is not None and row.name not in stepped
+                  and getattr(self, row.name) != 0]
+        if others:
+            return (f"--algorithm {name} has steps for {' and '.join('--' + p for p in stepped)} only, "
+                    f"not {', '.join(others)} (use --algorithm fista)")
+        return None
 
 Settings = make_dataclass(
     "Settings", [(row.name, float | str, field(default=row.default)) for row in PRIORS], bases=(SolverSettings,),

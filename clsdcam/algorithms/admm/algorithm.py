@@ -64,6 +64,7 @@ class Admm(Algorithm):
 
     name = "admm"
     monotone = False
+    converges_soonest = True       # --algorithm auto's choice with --iters auto (docs/convergence.md)
     # field cubes it keeps, for the device's memory plan (cl_devices.problem_bytes): v, Hv, ρ, w, the rest, η and s
     # on three axes (11), three spectra (the c-step's two and the DCT's) with the divisors (3.5), the start (1), the
     # model's field and a scratch (2); FISTA keeps 6
