@@ -27,6 +27,7 @@ from unittest import mock
 import pytest
 
 from clsdcam.cli import main
+from clsdcam.cli.demo import fill_defaults
 from clsdcam.cli.options import build_parser
 from clsdcam.errors import InputError
 
@@ -129,6 +130,8 @@ class Walk:
             parsed = build_parser().parse_args(args)
         except InputError as exc:                      # argparse's one line
             return [f"clsdcam does not accept it: {exc}"]
+        if parsed.command == "demo":                   # its folder depends on --quick
+            fill_defaults(parsed)
         problems = [f"reads {path}: {why}" for path in values(parsed, INPUTS) if (why := self.unavailable(str(path)))]
         self.produced |= {str(v) for v in values(parsed, OUTPUTS)}
         return problems
