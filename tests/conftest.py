@@ -87,3 +87,16 @@ def cl_keep_buffers(request):
     cl.Buffer = KeptBuffer
     yield
     cl.Buffer = buffer_class
+
+
+TINY = ["--size", "24x32", "--bands", "4"]      # the smallest simulated camera the command-line tests use
+
+
+@pytest.fixture(scope="module")
+def tiny_sim(tmp_path_factory) -> Path:
+    """A tiny simulated camera (``clsdcam simulate`` at TINY): calibration.h5, measurement.npy, truth.h5."""
+    from clsdcam.cli import main
+
+    folder = tmp_path_factory.mktemp("tiny") / "sim"
+    assert main(["simulate", str(folder), *TINY]) == 0
+    return folder

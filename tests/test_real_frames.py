@@ -9,16 +9,14 @@ import pytest
 import tifffile
 
 from clsdcam.cli import main
+from conftest import TINY
 
-SIZE = ["--size", "24x32", "--bands", "4"]
+SIZE = TINY
 
 
 @pytest.fixture(scope="module")
-def sim(tmp_path_factory) -> Path:
-    """A tiny simulated camera: calibration.h5, measurement.npy, truth.h5."""
-    folder = tmp_path_factory.mktemp("real") / "sim"
-    assert main(["simulate", str(folder), *SIZE]) == 0
-    return folder
+def sim(tiny_sim) -> Path:
+    return tiny_sim
 
 
 def reconstruct(sim: Path, measurement: Path, *extra: str) -> int:

@@ -16,21 +16,19 @@ import pytest
 
 import clsdcam.data
 from clsdcam.cli import main
+from conftest import TINY
 from clsdcam.cli.options import CREATES_FOLDERS
 from clsdcam.data import data_folder, locate
 from clsdcam.sim import shared_data_dir
 from clsdcam.sim.scenes import SAMSON, SAMSON_SHAPE
 from clsdcam.sim.sweep import CORNERSTONE
 
-SIZE = ["--size", "24x32", "--bands", "4"]
+SIZE = TINY
 
 
 @pytest.fixture(scope="module")
-def sim(tmp_path_factory) -> Path:
-    """A tiny simulated camera: calibration.h5, measurement.npy, truth.h5."""
-    folder = tmp_path_factory.mktemp("user") / "sim"
-    assert main(["simulate", str(folder), *SIZE]) == 0
-    return folder
+def sim(tiny_sim) -> Path:
+    return tiny_sim
 
 
 def one_line_error(capsys) -> str:
