@@ -79,8 +79,9 @@ class SolverSettings:
 
     def _auto_algorithm(self) -> str:
         """``--algorithm auto``: for a solve run until converged (``--iters auto``), the first algorithm that declares
-        itself the one to converge with (:attr:`~clsdcam.algorithms.base.Algorithm.converges_soonest`: ADMM, which
-        reaches the model's answer in fewer iterations and seconds, docs/convergence.md) and can run these settings;
+        itself the one to converge with (:attr:`~clsdcam.algorithms.base.Algorithm.converges_soonest`: ADMM, whose
+        steps shrink smoothly enough for the stop to trust, where FISTA's restarts fool it, docs/convergence.md) and
+        can run these settings;
         FISTA for a fixed number of iterations (its path is the better one at a budget) and for everything else."""
         if self.iters == AUTO:
             for name, algorithm in ALGORITHMS.items():
