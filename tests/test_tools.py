@@ -9,6 +9,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import bench_accuracy  # noqa: E402
 import bench_breakdown  # noqa: E402
+import bench_converged  # noqa: E402
 import bench_iteration  # noqa: E402
 import bench_panel  # noqa: E402
 import bench_recon  # noqa: E402
@@ -191,6 +192,36 @@ def test_bench_panel_draws_fresh_scenes_of_every_kind_and_judges_both_rules(tmp_
     assert [title for title, _ in bench_panel.margin_panels(results)] == [
         "default against --no-skip, worst mark", "chosen weight against the best fixed weight"]
     assert (tmp_path / "panel.png").stat().st_size > 0 and (tmp_path / "curves.png").stat().st_size > 0
+
+
+def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_path, capsys, monkeypatch):
+    """Each scene: today, the default and both references; the answer is the better reference final per metric, the
+    margins follow from the finals; a replay reads the references from the cache (no new file) and gives the same
+    reference; the stop replayed at a huge tolerance stops where the estimate first exists."""
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise", "sparse"])
+    args = ["--size", "24x32", "--bands", "4", "--scenes", "2", "--seed", "3", "--reference-iters", "150",
+            "--replay", "1e9", "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "a")]
+    bench_converged.main(args)
+    first = json.loads((tmp_path / "a" / "converged.json").read_text())
+    cached = sorted((tmp_path / "cache").iterdir())
+    assert len(cached) == 4 and [s["kind"] for s in first["scenes"]] == ["piecewise", "sparse"]
+    for scene in first["scenes"]:
+        finals = [run["points"][-1] for run in scene["references"].values()]
+        assert scene["reference"] == {"psnr": max(p["psnr"] for p in finals), "angle": min(p["angle"] for p in finals)}
+        assert scene["today"]["iterations"] == 300 and scene["default"]["stop_reason"] in ("converged", "iterations")
+        margins = scene["margins"]
+        assert margins["answer_db"] == pytest.approx(scene["default"]["psnr"] - scene["reference"]["psnr"] + 0.2)
+        assert margins["time_ratio"] == pytest.approx(scene["default"]["seconds"] / scene["today"]["seconds"])
+        stop = bench_converged.replay_stop(scene["references"]["admm"], 1e9)
+        assert stop["iteration"] == bench_converged.AUTO_AT + 4 * 25     # four windows after the weight's restart
+    text = capsys.readouterr().out
+    assert "| 0 | piecewise | standard |" in text and "stop at 1e+09" in text
+    bench_converged.main(args[:-1] + [str(tmp_path / "b")])
+    again = json.loads((tmp_path / "b" / "converged.json").read_text())
+    assert sorted((tmp_path / "cache").iterdir()) == cached
+    assert [s["reference"] for s in again["scenes"]] == [s["reference"] for s in first["scenes"]]
+    assert (tmp_path / "b" / "converged.png").stat().st_size > 0
 
 
 def test_bench_panel_replays_one_scene_and_judges_a_speed_option(tmp_path, capsys, monkeypatch):
