@@ -23,8 +23,9 @@ The rules (issue "Converged by default"), each scene's margins positive when it 
 Also reported: FISTA's own seconds to come within 0.2 dB and 0.5° of the reference (from the reference run's
 snapshots) over the default's, the speed-up. Writes ``converged.json`` (after every scene), ``converged.md`` and
 ``converged.png`` (every scene's PSNR and angle against seconds: both references' curves, today and the default as
-points, the reference's band). ``--seed`` replays a panel, ``--only I,J`` some scenes of it; ``--weight-from today`` takes the weight
-from today's run instead, and ``--replay`` replays the stop at other tolerances on the cached reference runs.
+points, the reference's band). ``--seed`` replays a panel, ``--only I,J`` some scenes of it; ``--weight-from
+today`` takes the weight from today's run instead, and ``--replay`` replays the stop at other tolerances on the
+cached reference runs.
 """
 from __future__ import annotations
 

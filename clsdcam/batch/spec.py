@@ -33,8 +33,8 @@ class BatchSpec:
                              "sensor's bad pixels with dead_pixels instead)")
 
     def budget(self, warm: bool) -> int:
-        """Iterations of a frame at most: ``settings.budget`` when warm-started (or without warm starts at all), else the
-        cold budget."""
+        """Iterations of a frame at most: ``settings.budget`` when warm-started (or without warm starts at all), else
+        the cold budget."""
         if warm or not self.warm_start:
             return self.settings.budget
         return self.cold_iters or max(COLD_ITERS, self.settings.budget)

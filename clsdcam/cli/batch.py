@@ -66,9 +66,10 @@ def _run_batch(args):
     from .options import preprocessing_from, settings_from
     from .solve import chosen_backend
 
+    settings = settings_from(args)
     spec = BatchSpec(frames=tuple(args.frames), calibration=args.calibration, preprocessing=preprocessing_from(args),
-                     settings=settings_from(args), backend=chosen_backend(args), device=args.device, fft=args.fft,
-                     path=args.path, warm_start=not args.no_warm_start, cold_iters=args.cold_iters)
+                     settings=settings, backend=chosen_backend(args, settings.algorithm), device=args.device,
+                     fft=args.fft, path=args.path, warm_start=not args.no_warm_start, cold_iters=args.cold_iters)
     bars = []
     try:
         return run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,

@@ -15,8 +15,9 @@ def solve(args, calibration, measurement, snapshots=()):
     """Build the solver and run it with a progress bar; Ctrl-C without --save-on-interrupt propagates."""
     from ..solve.solver import Solver
 
-    solver = Solver(calibration, backend=chosen_backend(args), device=args.device, settings=settings_from(args),
-                    fft=args.fft, path=args.path)
+    settings = settings_from(args)
+    solver = Solver(calibration, backend=chosen_backend(args, settings.algorithm), device=args.device,
+                    settings=settings, fft=args.fft, path=args.path)
     be = solver.backend
     if not args.quiet:
         print(f"backend {be.name} on {be.device_name} ({be.path} path, FFT: {be.fft_engine}); field "
@@ -28,15 +29,14 @@ def solve(args, calibration, measurement, snapshots=()):
     return result
 
 
-def chosen_backend(args) -> str:
+def chosen_backend(args, algorithm: str = "fista") -> str:
     """The backend ``--backend`` names; for ``auto`` (the default) its choice
     (:func:`clsdcam.backends.resolve_backend`), said in one line: ``backend: opencl on DEVICE (auto: a GPU was
-    found)`` or ``backend: numpy (auto: no OpenCL GPU)``; NumPy for an algorithm whose ``backends`` leave OpenCL
-    out."""
+    found)`` or ``backend: numpy (auto: no OpenCL GPU)``; NumPy for an ``algorithm`` (the settings' name, "auto"
+    resolved) whose ``backends`` leave OpenCL out."""
     from ..algorithms import ALGORITHMS
     from ..backends import resolve_backend
 
-    algorithm = settings_from(args).algorithm if hasattr(args, "algorithm") else "fista"    # "auto" resolved
     runs_on = ALGORITHMS[algorithm].backends
     if args.backend == "auto" and runs_on is not None and "opencl" not in runs_on:
         name, why = "numpy", f"--algorithm {algorithm} runs on NumPy"

@@ -8,13 +8,13 @@ With c_i = ‖x_{i+1} − x_i‖/‖x_{i+1}‖ (every record's ``change``), the 
 A sequence that converges linearly, ‖x_i − x*‖ ≈ C·ρ^i, has windows that shrink by q = ρ^W each, so the road left
 is the geometric tail
 
-    d_j = S_j · q/(1 − q),      q = max(S_j/S_{j−1}, S_{j−1}/S_{j−2}, S_{j−2}/S_{j−3})    (the slowest of the last three)
+    d_j = S_j · q/(1 − q),      q = max(S_j/S_{j−1}, S_{j−1}/S_{j−2}, S_{j−2}/S_{j−3})   (the slowest of three)
 
 an estimate of ‖x − x*‖/‖x*‖ (the triangle inequality makes S_j an over-estimate of the window's net move when the
 momentum zig-zags: the estimate errs towards more iterations). While the windows do not shrink (q ≥ 1: a new
 weight, FISTA's momentum building up again after a restart) the distance is unknown (∞) and the solve goes on; the
-slowest of three ratios keeps one window cut short by a restart from passing for convergence. The solve stops at the end of the
-first window whose d_j is below the tolerance.
+slowest of three ratios keeps one window cut short by a restart from passing for convergence. The solve stops at the
+end of the first window whose d_j is below the tolerance.
 """
 from __future__ import annotations
 

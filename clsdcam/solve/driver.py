@@ -16,9 +16,10 @@ in :mod:`clsdcam.solve.tracker`.
 It stops after ``iters`` iterations, when the estimated relative distance to the limit
 (:mod:`clsdcam.solve.convergence`, kept in the records as ``distance``) falls below ``converge`` ("converged"), when
 the relative change ‖x⁺ − x‖/‖x⁺‖ falls below ``tol`` ("tolerance"), when the objective fell by less than
-``plateau`` (relative) between two checkpoints ("plateau"), when ``should_stop`` says so, on Ctrl-C ("interrupted", returning the best iterate), or after too many back-offs
-("diverged"), and says why. Between phases the caller may move the algorithm to another space (:meth:`Driver.move`)
-or change the objective (:meth:`Driver.rescore`); :func:`minimize` is one phase from x0.
+``plateau`` (relative) between two checkpoints ("plateau"), when ``should_stop`` says so, on Ctrl-C ("interrupted",
+returning the best iterate), or after too many back-offs ("diverged"), and says why. Between phases the caller may
+move the algorithm to another space (:meth:`Driver.move`) or change the objective (:meth:`Driver.rescore`);
+:func:`minimize` is one phase from x0.
 """
 from __future__ import annotations
 

@@ -60,7 +60,8 @@ class Reconstruction:
         start.apply_weights(priors)
         spaces = Spaces(self.model, self.b, priors, solver.calibration.filters, solver.lipschitz,
                         solver.last_lipschitz, solver.shared)
-        rules = Rules(converge=s.stop_distance, tol=s.tol, plateau=s.plateau, objective_every=s.objective_every, restart=s.restart)
+        rules = Rules(converge=s.stop_distance, tol=s.tol, plateau=s.plateau, objective_every=s.objective_every,
+                      restart=s.restart)
         algorithm = ALGORITHMS[s.algorithm](be, start.field, start.step_factor / solver.lipschitz, rules)
         if start.carry is not None:
             algorithm.resume(*start.carry)

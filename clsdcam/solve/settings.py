@@ -81,8 +81,8 @@ class SolverSettings:
         """``--algorithm auto``: for a solve run until converged (``--iters auto``), the first algorithm that declares
         itself the one to converge with (:attr:`~clsdcam.algorithms.base.Algorithm.converges_soonest`: ADMM, whose
         steps shrink smoothly enough for the stop to trust, where FISTA's restarts fool it, docs/convergence.md) and
-        can run these settings;
-        FISTA for a fixed number of iterations (its path is the better one at a budget) and for everything else."""
+        can run these settings; FISTA for a fixed number of iterations (its path is the better one at a budget) and
+        for everything else."""
         if self.iters == AUTO:
             for name, algorithm in ALGORITHMS.items():
                 if algorithm.converges_soonest and self._algorithm_limit(name, algorithm) is None:
@@ -90,8 +90,8 @@ class SolverSettings:
         return "fista"
 
     def _check_algorithm_limits(self, algorithm):
-        _require(self._algorithm_limit(self.algorithm, algorithm) is None,
-                 self._algorithm_limit(self.algorithm, algorithm))
+        limit = self._algorithm_limit(self.algorithm, algorithm)
+        _require(limit is None, limit)
 
     def _algorithm_limit(self, name: str, algorithm) -> str | None:
         """What the algorithm declares it cannot do yet (:mod:`clsdcam.algorithms.base`) and these settings ask
@@ -105,6 +105,7 @@ class SolverSettings:
             return (f"--algorithm {name} has steps for {' and '.join('--' + p for p in stepped)} only, "
                     f"not {', '.join(others)} (use --algorithm fista)")
         return None
+
 
 Settings = make_dataclass(
     "Settings", [(row.name, float | str, field(default=row.default)) for row in PRIORS], bases=(SolverSettings,),
