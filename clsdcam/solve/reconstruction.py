@@ -13,6 +13,7 @@ subspace's L and the shared store algorithms build their calibration terms in.
 """
 from __future__ import annotations
 
+import math
 from functools import cached_property
 from typing import Callable
 
@@ -82,7 +83,7 @@ class Reconstruction:
         fit, structure = self._residual_figures(phases.problem, driver.x)
         out.attrs.update(relative_residual=fit, residual_to_noise=structure)
         if rules.converge:
-            out.attrs["distance_estimate"] = driver.history[-1]["distance"] if driver.history else 0.0
+            out.attrs["distance_estimate"] = driver.history[-1]["distance"] if driver.history else math.inf
         out.snapshots = copies.kept
         carry = algorithm.carry()
         factor = self.units.cube_factor
