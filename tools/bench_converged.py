@@ -199,7 +199,7 @@ def replay_rows(results: dict) -> list[str]:
             first = first_within(run["points"], ref)
             cells = [stop_cell(replay_stop(run, t), ref) for t in tolerances]
             rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {name} | "
-                        f"{first['iteration'] if first else '–'} | " + " | ".join(cells) + " |")
+                        f"{int(first['iteration']) if first else '–'} | " + " | ".join(cells) + " |")
     return rows
 
 
