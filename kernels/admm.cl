@@ -3,28 +3,43 @@
  * x-step's gains g = f/(μ₁ + ‖f‖²) are (K, H, W); b is (H, W). The split arrays η and s hold one cube per active TV
  * axis, in axis order (λ, y, x). Differences along λ stop at the last band; along y and x they are circular. */
 
-/* admm_x_step, a reduction (reduce.cl) over the n = H·W sensor pixels: with q_k = hv_k + ξ_k at pixel p,
- *   ξ_k ← −g_k·(b − Σ_j f_j·q_j),   hv_k ← q_k − 2·ξ_k   (= x − ξ⁺, the next c-step's data term);
- * partial sums of ½(Σ_k f_k·hv_k − b)², the data term at v (before the step). Sums over k in ACC. */
+/* admm_x_step, a reduction (reduce.cl) over the n = Hp·Wp field pixels: with q_k = α·hv_k + (1 − α)·x_k (+ ξ_k on
+ * the window) at pixel p, on the sensor window
+ *   ξ_k ← −g_k·(b − Σ_j f_j·q_j),   x_k ← q_k − ξ_k,   hv_k ← x_k − ξ_k   (= x − ξ⁺, the next c-step's data term)
+ * and outside it x_k ← q_k, hv_k ← q_k (no data there, no dual); partial sums of ½(Σ_k f_k·hv_k − b)², the data
+ * term at v (before the step). Sums over k in ACC. */
 __kernel void admm_x_step(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
-                          __global REAL *hv, __global REAL *xi, __global const REAL *f, __global const REAL *gain,
-                          __global const REAL *b, int K, int W, int Hp, int Wp)
+                          __global REAL *hv, __global REAL *x, __global REAL *xi, __global const REAL *f,
+                          __global const REAL *gain, __global const REAL *b, int K, int H, int W, int Wp, REAL alpha)
 {
     ACC s = 0, c = 0;
-    size_t plane = (size_t)Hp * Wp;
-    FOR_TERMS(p) {
-        size_t at = (p / W) * Wp + p % W;
+    size_t window = (size_t)H * W;
+    FOR_TERMS(at) {
+        size_t y = at / Wp, col = at % Wp, p = y * W + col;
+        if (y >= H || col >= W) {
+            for (int k = 0; k < K; ++k) {
+                size_t i = k * n + at;
+                REAL q = alpha * hv[i] + ((REAL)1 - alpha) * x[i];
+                x[i] = q;
+                hv[i] = q;
+            }
+            continue;
+        }
         ACC fitted = 0, stepped = 0;
         for (int k = 0; k < K; ++k) {
-            REAL fk = f[k * n + p], h = hv[k * plane + at];
+            size_t i = k * n + at;
+            REAL fk = f[k * window + p], h = hv[i];
             fitted += (ACC)fk * (ACC)h;
-            stepped += (ACC)fk * (ACC)(h + xi[k * n + p]);
+            stepped += (ACC)fk * (ACC)(alpha * h + ((REAL)1 - alpha) * x[i] + xi[k * window + p]);
         }
         REAL misfit = b[p] - (REAL)stepped;
         for (int k = 0; k < K; ++k) {
-            REAL q = hv[k * plane + at] + xi[k * n + p], e = -gain[k * n + p] * misfit;
-            xi[k * n + p] = e;
-            hv[k * plane + at] = q - (REAL)2 * e;
+            size_t i = k * n + at;
+            REAL q = alpha * hv[i] + ((REAL)1 - alpha) * x[i] + xi[k * window + p], e = -gain[k * window + p] * misfit;
+            xi[k * window + p] = e;
+            q -= e;
+            x[i] = q;
+            hv[i] = q - e;
         }
         ACC r = fitted - (ACC)b[p];
         acc_add(&s, &c, (ACC)0.5 * r * r);
@@ -32,16 +47,16 @@ __kernel void admm_x_step(__global ACC *partial, __local ACC *scratch, long n, l
     store_partial(partial, group_reduce(s - c, scratch, 0));
 }
 
-/* admm_w_step, a reduction over the n = K·Hp·Wp elements: with q = v + ρ,
+/* admm_w_step, a reduction over the n = K·Hp·Wp elements: with q = α·v + (1 − α)·w + ρ,
  *   w⁺ = max(q − shift, 0),   ρ ← q − w⁺,   rest ← μ₃(w⁺ − ρ)   (the next right-hand side's start);
  * partial sums of ‖w⁺ − w‖² (output 0) and ‖w⁺‖² (output 1). NaN propagates, as np.maximum. */
 __kernel void admm_w_step(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
                           __global const REAL *v, __global REAL *rho, __global REAL *w, __global REAL *rest,
-                          REAL shift, REAL mu)
+                          REAL shift, REAL mu, REAL alpha)
 {
     ACC s0 = 0, c0 = 0, s1 = 0, c1 = 0;
     FOR_TERMS(i) {
-        REAL q = v[i] + rho[i], z = q - shift;
+        REAL q = alpha * v[i] + ((REAL)1 - alpha) * w[i] + rho[i], z = q - shift;
         z = z < 0 ? (REAL)0 : z;
         REAL d = w[i] - z;
         acc_add(&s0, &c0, (ACC)d * (ACC)d);
@@ -64,11 +79,12 @@ inline REAL forward_difference(__global const REAL *v, int axis, int k, int y, i
     return v[at3(k, y, x + 1 == Wp ? 0 : x + 1, Hp, Wp)] - here;
 }
 
-/* admm_u_step: for each active axis d (bit d of mask) with its threshold t_d = τw_d/μ₂ and q = D_d v + η_d,
+/* admm_u_step: for each active axis d (bit d of mask) with its threshold t_d = τw_d/μ₂ and
+ * q = α·D_d v + (1 − α)·u_d + η_d, where u_d = s_d + η_d,
  *   η_d ← clip(q, ±t_d),   s_d ← q − 2η_d   (= u_d − η_d⁺, soft(q, t_d) being q − clip(q, ±t_d)).
  * Grid (x, y, k) over (Wp, Hp, K), x and y rounded up (bounds-checked). */
 __kernel void admm_u_step(__global REAL *eta, __global REAL *s, __global const REAL *v, int K, int Hp, int Wp,
-                          int mask, REAL t0, REAL t1, REAL t2)
+                          int mask, REAL t0, REAL t1, REAL t2, REAL alpha)
 {
     int x = get_global_id(0), y = get_global_id(1), k = get_global_id(2);
     if (x >= Wp || y >= Hp) return;
@@ -76,7 +92,8 @@ __kernel void admm_u_step(__global REAL *eta, __global REAL *s, __global const R
     REAL limits[3] = {t0, t1, t2};
     for (int axis = 0; axis < 3; ++axis) {
         if (!((mask >> axis) & 1)) continue;
-        REAL q = forward_difference(v, axis, k, y, x, K, Hp, Wp) + eta[at], e = clip_to(q, limits[axis]);
+        REAL q = alpha * forward_difference(v, axis, k, y, x, K, Hp, Wp) + ((REAL)1 - alpha) * s[at]
+                 + ((REAL)2 - alpha) * eta[at], e = clip_to(q, limits[axis]);
         eta[at] = e;
         s[at] = (q - e) - e;
         at += cube;

@@ -54,12 +54,12 @@ def differences(split, v) -> np.ndarray:
 
 def random_state(split) -> SplitState:
     state, _ = split.start(RNG.random(split.shape))
-    for name in ("v", "hv", "xi", "rho", "w", "eta", "s", "rest"):
+    for name in ("v", "hv", "x", "xi", "rho", "w", "eta", "s", "rest"):
         getattr(state, name)[...] = RNG.standard_normal(getattr(state, name).shape)
     return state
 
 
-def grid_argmin(cost, q, grid=np.linspace(-6, 6, 120001)) -> float:
+def grid_argmin(cost, q, grid=np.linspace(-12, 12, 240001)) -> float:
     return grid[np.argmin(cost(grid) + (grid - q) ** 2 / 2)]
 
 
@@ -124,25 +124,31 @@ def test_h_is_the_models_convolution_in_the_window(tiny):
     np.testing.assert_allclose(filtered, model.forward(v), rtol=1e-10)
 
 
-def test_the_splits_minimise_their_problems(tiny):
-    """Against brute force: x_p = argmin ½(b_p − f_pᵀx_p)² + μ₁/2‖x_p − q_p‖² (a K×K solve per pixel; q outside the
-    window), u = argmin τw_d|u| + μ₂/2(u − q)², w = argmin τ₁|w| + ι(w ≥ 0) + μ₃/2(w − q)² (grid searches); each
-    dual = q − z, and what the c-step reads: x − ξ, s = u − η, μ₃(w − ρ); the data term at v and w's change."""
+@pytest.mark.parametrize("alpha", [1.0, 1.7])
+def test_the_splits_minimise_their_problems(tiny, alpha):
+    """Against brute force, each split at its over-relaxed point (α·K v + (1 − α)·z + dual, z the split's last value:
+    x, u = s + η, w): x_p = argmin ½(b_p − f_pᵀx_p)² + μ₁/2‖x_p − q_p‖² (a K×K solve per pixel; q outside the window),
+    u = argmin τw_d|u| + μ₂/2(u − q)², w = argmin τ₁|w| + ι(w ≥ 0) + μ₃/2(w − q)² (grid searches); each dual = q − z,
+    and what the c-step reads: x − ξ, s = u − η, μ₃(w − ρ); the data term at v and w's change."""
     _, split = tiny
     p, (h, w) = split.penalties, split.sensor_shape
     state = random_state(split)
     xi = np.zeros(split.shape)
     xi[:, :h, :w] = state.xi
-    q_x, q_u, q_w = state.hv + xi, differences(split, state.v) + state.eta, state.v + state.rho
+    u = state.s + state.eta
+    q_x = alpha * state.hv + (1 - alpha) * state.x + xi
+    q_u = alpha * differences(split, state.v) + (1 - alpha) * u + state.eta
+    q_w = alpha * state.v + (1 - alpha) * state.w + state.rho
     fitted = np.einsum("khw,khw->hw", split.filters, state.hv[:, :h, :w])
     w_before = state.w.copy()
-    data, (step, norm) = split.splits(state)
+    data, (step, norm) = split.splits(state, alpha)
     assert data == pytest.approx(0.5 * np.sum((fitted - split.b) ** 2), rel=1e-12)
     x = q_x.copy()
     for i in range(h):
         for j in range(w):
             f = split.filters[:, i, j]
             x[:, i, j] = np.linalg.solve(np.outer(f, f) + p.data * np.eye(3), f * split.b[i, j] + p.data * q_x[:, i, j])
+    np.testing.assert_allclose(state.x, x, atol=1e-12)
     np.testing.assert_allclose(state.xi, (q_x - x)[:, :h, :w], atol=1e-12)
     np.testing.assert_allclose(state.hv, x - (q_x - x), atol=1e-12)
     for i, axis in enumerate(split.axes):

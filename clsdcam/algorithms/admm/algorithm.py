@@ -29,6 +29,7 @@ if TYPE_CHECKING:                 # the parser lists the algorithms: the steps' 
     from .terms import Penalties, SplittingBase
 
 DATA, TV, NONNEG = 1e-2, 1e-2, 1e-2
+RELAXATION = 1.7     # every split's over-relaxation α (docs/convergence.md: how it was chosen)
 
 
 def penalties_for(split: "SplittingBase") -> "Penalties":
@@ -53,10 +54,10 @@ def band_steps(problem) -> "SplittingBase":
     if isinstance(backend, Programs):
         from .kernel_steps import KernelSplitting
 
-        return KernelSplitting(model, problem.b, terms, tv, l1)
+        return KernelSplitting(model, problem.b, terms, tv, l1, RELAXATION)
     from .host_steps import Splitting
 
-    return Splitting(model, backend.to_host(problem.b), terms, tv, l1, backend.workers)
+    return Splitting(model, backend.to_host(problem.b), terms, tv, l1, backend.workers, RELAXATION)
 
 
 class Admm(Algorithm):
@@ -65,10 +66,10 @@ class Admm(Algorithm):
     name = "admm"
     monotone = False
     converges_soonest = True       # --algorithm auto's choice with --iters auto (docs/convergence.md)
-    # field cubes it keeps, for the device's memory plan (cl_devices.problem_bytes): v, Hv, ρ, w, the rest, η and s
-    # on three axes (11), three spectra (the c-step's two and the DCT's) with the divisors (3.5), the start (1), the
-    # model's field and a scratch (2); FISTA keeps 6
-    field_buffers = 18
+    # field cubes it keeps, for the device's memory plan (cl_devices.problem_bytes): v, Hv, x, ρ, w, the rest, η and
+    # s on three axes (12), three spectra (the c-step's two and the DCT's) with the divisors (3.5), the start (1),
+    # the model's field and a scratch (2); FISTA keeps 6
+    field_buffers = 19
     band_space_only = True         # no splitting of a spectral subspace yet
     priors = ("tv", "l1")          # the priors it has a closed-form step for (band_steps)
 
@@ -114,7 +115,7 @@ class Admm(Algorithm):
     def resume(self, state, factor: float) -> None:
         """Go on from a previous solve's splits and duals (:meth:`carry`), every array times ``factor`` (its units to
         this solve's: the problem is homogeneous in b), instead of starting the duals afresh."""
-        for name in ("v", "hv", "xi", "rho", "w", "eta", "s", "rest"):
+        for name in ("v", "hv", "x", "xi", "rho", "w", "eta", "s", "rest"):
             array = getattr(state, name)
             self.backend.scale(factor, array, out=array)
         self._resumed = state

@@ -66,12 +66,23 @@ def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarr
     return out
 
 
+def relax(q: np.ndarray, previous: np.ndarray, alpha: float) -> np.ndarray:
+    """q ← αq + (1 − α)·previous in place (nothing when α = 1): a split's over-relaxed point, α and 1 − α rounded
+    to q's precision as the kernels round them."""
+    if alpha != 1.0:
+        alpha = q.dtype.type(alpha)
+        q *= alpha
+        q += (q.dtype.type(1) - alpha) * previous
+    return q
+
+
 class Splitting(SplittingBase):
     """ADMM's steps for one band-space problem (see the module docstring) on NumPy arrays, in row blocks on
     ``workers`` threads; ``b`` the normalised measurement."""
 
-    def __init__(self, model, b: np.ndarray, terms: CalibrationTerms, tv=None, l1=None, workers: int = 1):
-        super().__init__(model, terms, tv, l1)
+    def __init__(self, model, b: np.ndarray, terms: CalibrationTerms, tv=None, l1=None, workers: int = 1,
+                 relaxation: float = 1.0):
+        super().__init__(model, terms, tv, l1, relaxation)
         self.workers = workers
         self.b = np.asarray(b, self.dtype)
         self.filters, self.transfer = terms.filters, terms.transfer
@@ -80,12 +91,12 @@ class Splitting(SplittingBase):
 
     # ---- the state -----------------------------------------------------------------------------------------
     def start(self, v0: np.ndarray) -> tuple[SplitState, float]:
-        """The state from v = v0 with zero duals: Hv by one convolution (2K transforms), then every split's step;
-        and the data term at v0."""
+        """The state from v = v0 with zero duals: Hv by one convolution (2K transforms), then every split's step
+        unrelaxed (there is no previous split to relax towards); and the data term at v0."""
         cube, spectrum = self.shape, (self.n_bands, self.field_shape[0], self.field_shape[1] // 2 + 1)
         per_axis = (len(self.axes),) + cube
         zeros = np.zeros
-        state = SplitState(v=np.array(v0, self.dtype), hv=zeros(cube, self.dtype),
+        state = SplitState(v=np.array(v0, self.dtype), hv=zeros(cube, self.dtype), x=zeros(cube, self.dtype),
                            xi=zeros((self.n_bands,) + self.sensor_shape, self.dtype), rho=zeros(cube, self.dtype),
                            w=zeros(cube, self.dtype), eta=zeros(per_axis, self.dtype), s=zeros(per_axis, self.dtype),
                            rest=zeros(cube, self.dtype),
@@ -105,57 +116,73 @@ class Splitting(SplittingBase):
         self._irfft2(data, state.v)
         self._irfft2(rest, state.hv)
 
-    def splits(self, state: SplitState) -> tuple[float, tuple[float, float]]:
-        """Every split's step and dual on row blocks, and what the next c-step needs of them (the module
-        docstring); the data term at v and the change of w."""
+    def splits(self, state: SplitState, alpha: float = 1.0) -> tuple[float, tuple[float, float]]:
+        """Every split's step and dual, relaxed by ``alpha``, on row blocks, and what the next c-step needs of them
+        (the module docstring); the data term at v and the change of w."""
         k, hp, wp = self.shape
-        parts = map_blocks(lambda y0, y1, scratch: self._split_block(state, y0, y1, scratch), hp,
+        parts = map_blocks(lambda y0, y1, scratch: self._split_block(state, y0, y1, scratch, alpha), hp,
                            k * wp * self.dtype.itemsize, self.workers)
         data, step, norm = (float(np.sum([p[i] for p in parts], dtype=np.float64)) for i in range(3))
         return data, (step, norm)
 
     # ---- the passes ----------------------------------------------------------------------------------------
-    def _split_block(self, state: SplitState, y0: int, y1: int, scratch: dict) -> tuple[float, float, float]:
-        data = self._x_block(state, y0, y1)
-        step, norm = self._w_block(state, y0, y1, scratch)
-        self._u_block(state, y0, y1, scratch)
+    def _split_block(self, state: SplitState, y0: int, y1: int, scratch: dict, alpha: float):
+        data = self._x_block(state, y0, y1, alpha)
+        step, norm = self._w_block(state, y0, y1, scratch, alpha)
+        self._u_block(state, y0, y1, scratch, alpha)
         return data, step, norm
 
-    def _x_block(self, state: SplitState, y0: int, y1: int) -> float:
-        """q = Hv + ξ on the window's rows of the block; ξ ← −f·(b − fᵀq)/(μ₁ + ‖f‖²); Hv ← q − 2ξ (= x − ξ⁺)."""
+    def _x_block(self, state: SplitState, y0: int, y1: int, alpha: float) -> float:
+        """q = αHv + (1 − α)x (+ ξ on the window); ξ ← −f·(b − fᵀq)/(μ₁ + ‖f‖²) and x ← q − ξ on the window, x ← q
+        outside it; Hv ← x − ξ. The data term ½‖fᵀHv − b‖² over the block's window rows (at v, before the step)."""
+        h, w = self.sensor_shape
+        q, x = state.hv[:, y0:y1], state.x[:, y0:y1]
+        data = self._data_term(q, y0, y1)
+        relax(q, x, alpha)
+        x[...] = q
+        if y0 < h:
+            rows = slice(y0, min(y1, h))
+            window, x_window = q[:, :rows.stop - y0, :w], x[:, :rows.stop - y0, :w]
+            window += state.xi[:, rows]
+            misfit = self.b[rows] - np.einsum("khw,khw->hw", self.filters[:, rows], window)
+            xi = np.multiply(self._gain[:, rows], -misfit, out=state.xi[:, rows])
+            np.subtract(window, xi, out=x_window)
+            np.subtract(x_window, xi, out=window)
+        return data
+
+    def _data_term(self, hv: np.ndarray, y0: int, y1: int) -> float:
+        """½‖fᵀHv − b‖² over the window's rows among y0…y1 (0 below the window)."""
         h, w = self.sensor_shape
         if y0 >= h:
             return 0.0
         rows = slice(y0, min(y1, h))
-        q = state.hv[:, rows, :w]
-        f, b = self.filters[:, rows], self.b[rows]
-        fitted = np.einsum("khw,khw->hw", f, q)
-        residual = fitted - b
-        q += state.xi[:, rows]
-        misfit = b - np.einsum("khw,khw->hw", f, q)
-        np.multiply(self._gain[:, rows], -misfit, out=state.xi[:, rows])
-        q -= 2.0 * state.xi[:, rows]
+        residual = np.einsum("khw,khw->hw", self.filters[:, rows], hv[:, :rows.stop - y0, :w]) - self.b[rows]
         return 0.5 * float(np.vdot(residual.astype(np.float64), residual))
 
-    def _w_block(self, state: SplitState, y0: int, y1: int, scratch: dict) -> tuple[float, float]:
-        """q = v + ρ; w ← max(q − τ₁/μ₃, 0); ρ ← q − w; rest ← μ₃(w − ρ); (‖w⁺ − w‖², ‖w⁺‖²) over the block."""
+    def _w_block(self, state: SplitState, y0: int, y1: int, scratch: dict, alpha: float) -> tuple[float, float]:
+        """q = αv + (1 − α)w + ρ; w ← max(q − τ₁/μ₃, 0); ρ ← q − w; rest ← μ₃(w − ρ); (‖w⁺ − w‖², ‖w⁺‖²) over the
+        block."""
         p = self.penalties
-        q = np.add(state.v[:, y0:y1], state.rho[:, y0:y1], out=state.rho[:, y0:y1])
+        old = state.w[:, y0:y1]
+        q = scratch_buffer(scratch, "q", old.shape, old.dtype)
+        np.copyto(q, state.v[:, y0:y1])
+        relax(q, old, alpha)
+        q += state.rho[:, y0:y1]
         new = scratch_buffer(scratch, "w", q.shape, q.dtype)
         shift = self.nonneg_shift()
         np.subtract(q, shift, out=new) if shift else np.copyto(new, q)
         np.maximum(new, 0, out=new)
-        old = state.w[:, y0:y1]
         old -= new
         step = float(np.vdot(old.ravel(), old.ravel()))
         old[...] = new
-        q -= new                                              # ρ⁺
-        rest = np.subtract(new, q, out=state.rest[:, y0:y1])
+        rho = np.subtract(q, new, out=state.rho[:, y0:y1])
+        rest = np.subtract(new, rho, out=state.rest[:, y0:y1])
         rest *= p.nonneg
         return step, float(np.vdot(new.ravel(), new.ravel()))
 
-    def _u_block(self, state: SplitState, y0: int, y1: int, scratch: dict) -> None:
-        """q = D_d v + η_d; η_d ← clip(q, ±τw_d/μ₂); s_d ← q − 2η_d, per active axis."""
+    def _u_block(self, state: SplitState, y0: int, y1: int, scratch: dict, alpha: float) -> None:
+        """q = αD_d v + (1 − α)u_d + η_d, with u_d = s_d + η_d (so q = αD_d v + (1 − α)s_d + (2 − α)η_d);
+        η_d ← clip(q, ±τw_d/μ₂); s_d ← q − 2η_d, per active axis."""
         v = state.v
         q = scratch_buffer(scratch, "q", (self.n_bands, y1 - y0, self.shape[2]), self.dtype)
         for i, axis in enumerate(self.axes):
@@ -164,12 +191,13 @@ class Splitting(SplittingBase):
                 difference(block, 1, q, below=v[:, y1 % self.shape[1]])
             else:
                 difference(block, axis, q)
-            eta = state.eta[i, :, y0:y1]
-            q += eta
+            eta, s = state.eta[i, :, y0:y1], state.s[i, :, y0:y1]
+            relax(q, s, alpha)
+            q += (self.dtype.type(2) - self.dtype.type(alpha)) * eta if alpha != 1.0 else eta
             threshold = self.threshold(axis)
             np.clip(q, -threshold, threshold, out=eta)
-            np.subtract(q, eta, out=state.s[i, :, y0:y1])
-            state.s[i, :, y0:y1] -= eta
+            np.subtract(q, eta, out=s)
+            s -= eta
 
     def _add_tv_adjoint(self, state: SplitState) -> None:
         """rest += μ₂ΣD_dᵀs_d on row blocks."""

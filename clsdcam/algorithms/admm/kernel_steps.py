@@ -2,8 +2,8 @@
 :class:`KernelSplitting`, the same iteration as :class:`~clsdcam.algorithms.admm.host_steps.Splitting` (derived in
 :mod:`clsdcam.algorithms.admm`) on device arrays, on either path.
 
-* the splits are three kernels of ``kernels/admm.cl``: the x-step (one work item per sensor pixel, which also sums
-  the data term), the w-step (which also sums ‖w⁺ − w‖² and ‖w⁺‖²) and the u-step (every active TV axis in one pass);
+* the splits are three kernels of ``kernels/admm.cl``: the x-step (one work item per field pixel, which also sums
+  the data term on the sensor window), the w-step (which also sums ‖w⁺ − w‖² and ‖w⁺‖²) and the u-step (every active TV axis in one pass);
 * the c-step is the TV adjoint (one kernel), the backend's transforms (2K forward, 2K inverse), the right-hand side
   in Fourier (one kernel), the DCT along λ and its inverse as the backend's ``bandmix`` by the orthonormal DCT-II
   matrix on the spectrum's real and imaginary parts (a real K×K matrix mixes both alike), the division between them
@@ -36,8 +36,8 @@ class KernelSplitting(SplittingBase):
     """ADMM's steps for one band-space problem on a backend with programs (the module docstring); ``b`` the
     normalised measurement on the device."""
 
-    def __init__(self, model, b, terms: CalibrationTerms, tv=None, l1=None):
-        super().__init__(model, terms, tv, l1)
+    def __init__(self, model, b, terms: CalibrationTerms, tv=None, l1=None, relaxation: float = 1.0):
+        super().__init__(model, terms, tv, l1, relaxation)
         self.backend = model.backend
         self.kernels = self.backend.kernels
         self.b = b
@@ -57,13 +57,15 @@ class KernelSplitting(SplittingBase):
 
     # ---- the state -----------------------------------------------------------------------------------------
     def start(self, v0) -> tuple[SplitState, float]:
-        """The state from v = v0 with zero duals: Hv by one convolution (2K transforms), then every split's step;
-        and the data term at v0. Arrays every step writes before it reads them start uninitialised."""
+        """The state from v = v0 with zero duals: Hv by one convolution (2K transforms), then every split's step
+        unrelaxed; and the data term at v0. The arrays a relaxed step reads (x, s) start at zero, others that every
+        step writes before it reads them uninitialised."""
         be, cube = self.backend, self.shape
         spectrum = (self.n_bands, self.field_shape[0], self.field_shape[1] // 2 + 1)
         per_axis = (len(self.axes),) + cube
-        state = SplitState(v=be.copy(v0), hv=be.empty(cube), xi=be.zeros((self.n_bands,) + self.sensor_shape),
-                           rho=be.zeros(cube), w=be.zeros(cube), eta=be.zeros(per_axis), s=be.empty(per_axis),
+        state = SplitState(v=be.copy(v0), hv=be.empty(cube), x=be.zeros(cube),
+                           xi=be.zeros((self.n_bands,) + self.sensor_shape),
+                           rho=be.zeros(cube), w=be.zeros(cube), eta=be.zeros(per_axis), s=be.zeros(per_axis),
                            rest=be.empty(cube), spectra=(be.empty(spectrum, True), be.empty(spectrum, True)))
         self._convolve(state.v, state.spectra[0], state.hv)
         data, _ = self.splits(state)
@@ -81,17 +83,19 @@ class KernelSplitting(SplittingBase):
         be.ifft2(data, self.field_shape, out=state.v)
         be.ifft2(rest, self.field_shape, out=state.hv)
 
-    def splits(self, state: SplitState) -> tuple[float, tuple[float, float]]:
-        """The x-, w- and u-steps with their duals; the data term at v and (‖w⁺ − w‖², ‖w⁺‖²)."""
+    def splits(self, state: SplitState, alpha: float = 1.0) -> tuple[float, tuple[float, float]]:
+        """The x-, w- and u-steps with their duals, relaxed by ``alpha``; the data term at v and (‖w⁺ − w‖², ‖w⁺‖²)."""
         k, (h, w), (bands, hp, wp) = self.kernels, self.sensor_shape, self.shape
-        data = total(k.reduce("admm_x_step", h * w, state.hv, state.xi, self.filters, self._gain, self.b,
-                              *ints(bands, w, hp, wp)))
+        alpha = self._real(alpha)
+        data = total(k.reduce("admm_x_step", hp * wp, state.hv, state.x, state.xi, self.filters, self._gain, self.b,
+                              *ints(bands, h, w, wp), alpha))
         step, norm = (total(row) for row in k.reduce("admm_w_step", state.v.size, state.v, state.rho, state.w,
                                                      state.rest, self._real(self.nonneg_shift()),
-                                                     self._real(self.penalties.nonneg), outputs=2))
+                                                     self._real(self.penalties.nonneg), alpha, outputs=2))
         if self.axes:
             limits = [self._real(self.threshold(axis) if axis in self.axes else 0.0) for axis in range(3)]
-            k.grid3("admm_u_step", self.shape, state.eta, state.s, state.v, *ints(bands, hp, wp), self.mask, *limits)
+            k.grid3("admm_u_step", self.shape, state.eta, state.s, state.v, *ints(bands, hp, wp), self.mask, *limits,
+                    alpha)
         return self.backend.drained(data), (step, norm)
 
     def _add_tv_adjoint(self, state: SplitState) -> None:

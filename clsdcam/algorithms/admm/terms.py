@@ -23,11 +23,13 @@ class Penalties:
 
 @dataclass
 class SplitState:
-    """ADMM's arrays: v and Hv (the c-step's; Hv then holds x − ξ), ξ on the sensor window, ρ, w (the iterate),
-    η_d and s_d = u_d − η_d per active TV axis, the right-hand side's rest, the two spectra."""
+    """ADMM's arrays: v and Hv (the c-step's; Hv then holds x − ξ), x (the data split, kept for the relaxation),
+    ξ on the sensor window, ρ, w (the iterate), η_d and s_d = u_d − η_d per active TV axis, the right-hand side's
+    rest, the two spectra."""
 
     v: np.ndarray
     hv: np.ndarray
+    x: np.ndarray
     xi: np.ndarray
     rho: np.ndarray
     w: np.ndarray
@@ -100,12 +102,13 @@ class SplittingBase:
     on them. ``model``: the band space's :class:`~clsdcam.camera.model.ForwardModel`; ``terms`` its
     :class:`CalibrationTerms`; ``tv`` the :class:`~clsdcam.solve.priors.TotalVariation` prior or None, ``l1`` the
     :class:`~clsdcam.solve.priors.Sparsity` prior or None (their weights are read at every step: an automatic weight
-    chosen
-    mid-solve takes effect at once). A backend's steps (:class:`Splitting` on NumPy,
+    chosen mid-solve takes effect at once); ``relaxation`` α, each split's over-relaxation (the module docstring of
+    :mod:`clsdcam.algorithms.admm`; 1: none). A backend's steps (:class:`Splitting` on NumPy,
     :class:`~clsdcam.algorithms.admm.kernel_steps.KernelSplitting` with programs) add ``start``, ``c_step`` and ``splits``."""
 
-    def __init__(self, model, terms: CalibrationTerms, tv=None, l1=None):
+    def __init__(self, model, terms: CalibrationTerms, tv=None, l1=None, relaxation: float = 1.0):
         self.terms = terms
+        self.relaxation = relaxation
         self.dtype, self.cdtype = terms.dtype, terms.cdtype
         self.field_shape = model.field_shape
         self.sensor_shape = model.sensor_shape
@@ -145,9 +148,9 @@ class SplittingBase:
         return self.l1.weight / self.penalties.nonneg if self.l1 is not None else 0.0
 
     def iterate(self, state) -> tuple[float, tuple[float, float]]:
-        """The c-step then the splits: (½‖b − SFHv‖² at the new v, (‖w⁺ − w‖², ‖w⁺‖²))."""
+        """The c-step then the relaxed splits: (½‖b − SFHv‖² at the new v, (‖w⁺ − w‖², ‖w⁺‖²))."""
         self.c_step(state)
-        return self.splits(state)
+        return self.splits(state, self.relaxation)
 
 
 
