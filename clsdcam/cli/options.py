@@ -163,8 +163,10 @@ def add_backend_options(p: argparse.ArgumentParser):
     p.add_argument("--device", default=None,
                    help="OpenCL device: substring of platform or device name (default: PYOPENCL_CTX, else a GPU, else a CPU)")
     p.add_argument("--path", default="auto", choices=("auto", "host", "device"),
-                   help="which code runs the heavy primitives: host code on mapped buffers (CPU devices) or kernels "
-                        "(default auto: host on CPU devices, device elsewhere)")
+                   help="which code runs the heavy primitives: host code on mapped buffers (CPU devices only) or "
+                        "kernels with the FFT on the device (what a GPU runs; on a CPU device such as PoCL it is ten "
+                        "to a hundred times slower than host: docs/benchmarks.md) (default auto: host on CPU "
+                        "devices, device elsewhere)")
     p.add_argument("--fft", default="auto", choices=("auto", "host", "reikna", "vkfft"),
                    help="FFT engine (default auto: host pocketfft on the host path, vkfft if installed else reikna on "
                         "the device path)")
