@@ -152,12 +152,13 @@ def test_an_option_that_took_the_measurement_says_so(sim, tmp_path, capsys):
 def test_demo_quick_writes_its_own_folder_and_help_names_both(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(["demo", "--quick", *SIZE, "--iters", "3", "--quiet"]) == 0
-    assert (tmp_path / "clsdcam-demo-quick" / "cube.h5").exists() and not (tmp_path / "clsdcam-demo").exists()
+    assert (tmp_path / "clsdcam-out" / "demo-quick" / "cube.h5").exists()
+    assert not (tmp_path / "clsdcam-out" / "demo").exists()
     capsys.readouterr()
     with pytest.raises(SystemExit):
         main(["demo", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "default clsdcam-demo/; with --quick clsdcam-demo-quick/" in text
+    assert "default clsdcam-out/demo/; with --quick clsdcam-out/demo-quick/" in text
 
 
 # ---- help text ------------------------------------------------------------------------------------------------
