@@ -8,6 +8,7 @@ parser (clsdcam's `build_parser`, a tool's own), and every file it reads present
 neighbour) or written by an earlier README command, or one of the authors' downloads the README links to.
 Everything they write lies where git ignores it (`git status` stays clean). The blocks that need neither a download
 nor the set-up's demo also run for real, iterations capped, in a git repository that holds the clone's .gitignore.
+Every figure of the README (a number with a unit, or of iterations) is checked against the code that produces it.
 """
 from __future__ import annotations
 
@@ -307,6 +308,27 @@ def test_everything_the_readme_commands_write_is_ignored_by_git(tmp_path):
         (clone / path).parent.mkdir(parents=True, exist_ok=True)
         (clone / path).touch()
     assert len(walk.written) > 10 and not untracked(clone)
+
+
+FIGURE = r"\d[\d.,]*\s?(?:%|dB|°|×(?!\d)|ms\b|s\b|minutes?\b|frames/s|[MG]iB|(?:\w+ )?iterations\b)"
+
+
+def test_every_figure_of_the_readme_is_the_codes():
+    """The README's figures are those of the code that produces them (the demo's camera, the automatic stop,
+    bench_converged's reference), and it has no other (a measured figure lives in docs/ with its command)."""
+    from clsdcam.camera.prototype import N_BANDS, SENSOR_SHAPE, SPECTRAL_RANGE
+    from clsdcam.sim.filters import TILE
+    from clsdcam.solve.settings import AUTO_CAP, CONVERGE
+
+    with tools_importable():
+        reference = tool("tools/bench_converged.py")["TODAY"]
+    claims = [f"{TILE}×{TILE} spectral filter array, {N_BANDS} bands over {SPECTRAL_RANGE[0]:g}–{SPECTRAL_RANGE[1]:g} "
+              f"nm, {SENSOR_SHAPE[0]}×{SENSOR_SHAPE[1]} sensor", f"within {100 * CONVERGE:g} % of that minimiser",
+              f"`--converge {CONVERGE:g}`, at most {AUTO_CAP})", f"against {reference['iters']} "
+              f"{reference['algorithm'].upper()} iterations"]
+    text = " ".join(re.sub(r"```.*?```", "", README.read_text(encoding="utf-8"), flags=re.S).split())
+    assert [claim for claim in claims if claim not in text] == []
+    assert [figure for figure in re.findall(FIGURE, text) if not any(figure in claim for claim in claims)] == []
 
 
 @pytest.mark.parametrize("block", runnable_blocks(), ids=lambda block: block[0][1] + "-" + block[0][2].split("/")[-1])
