@@ -322,8 +322,9 @@ def test_every_figure_of_the_readme_is_the_codes():
 
     with tools_importable():
         reference = tool("tools/bench_converged.py")["TODAY"]
-    claims = [f"{TILE}×{TILE} spectral filter array, {N_BANDS} bands over {SPECTRAL_RANGE[0]:g}–{SPECTRAL_RANGE[1]:g} "
-              f"nm, {SENSOR_SHAPE[0]}×{SENSOR_SHAPE[1]} sensor", f"within {100 * CONVERGE:g} % of that minimiser",
+    low, high = SPECTRAL_RANGE
+    claims = [f"{TILE}×{TILE} spectral filter array, {N_BANDS} bands over {low:g}–{high:g} nm, "
+              f"{SENSOR_SHAPE[0]}×{SENSOR_SHAPE[1]} sensor", f"within {100 * CONVERGE:g} % of that minimiser",
               f"`--converge {CONVERGE:g}`, at most {AUTO_CAP})", f"against {reference['iters']} "
               f"{reference['algorithm'].upper()} iterations"]
     text = " ".join(re.sub(r"```.*?```", "", README.read_text(encoding="utf-8"), flags=re.S).split())

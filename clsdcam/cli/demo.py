@@ -19,7 +19,9 @@ TWO_POINT = "5–6 px"          # clsdcam analyze twopoint: two narrow-band poin
 
 
 def add_parser(subparsers):
-    p = subparsers.add_parser("demo", help=f"simulate the default scene, reconstruct it, report accuracy and time (into {OUTDIR}/)",
+    p = subparsers.add_parser("demo",
+                              help=f"simulate the default scene, reconstruct it into {OUTDIR}/, report accuracy "
+                                   "and time",
                               description=f"Simulate the default scene, reconstruct it, and write the cube, its "
                                           f"pictures and the simulation into OUTDIR (default {OUTDIR}/; with --quick "
                                           f"{QUICK_OUTDIR}/, so a first look leaves the full demo's folder alone); "

@@ -19,7 +19,7 @@ HELPERS = ("options", "solve")       # modules of this package that are not comm
 SCENES = ("target", "leds", "lines", "piecewise", "points", "sources", "realcube")   # clsdcam.sim.SCENES (tested)
 
 
-WORK = "clsdcam-out"    # the folder the demo and the tools write under by default, as the docs' examples do (git ignores it)
+WORK = "clsdcam-out"    # what the demo and the tools write under by default, as the docs' examples do (.gitignore)
 OUTPUTS = ("output", "outdir", "png", "json")   # the destinations of options that name where a command writes
 CREATES_FOLDERS = "missing folders are created when it is written"
 
