@@ -6,7 +6,9 @@ Each command must run from .venv (`.venv/bin/clsdcam`, `.venv/bin/python`, `.ven
 its executable installed by the set-up line or an earlier README command, its options accepted by the real
 parser (clsdcam's `build_parser`, a tool's own), and every file it reads present (in ../shared/data, the clone's
 neighbour) or written by an earlier README command, or one of the authors' downloads the README links to.
-The blocks that need neither a download nor the set-up's demo also run for real, iterations capped.
+Everything they write lies where git ignores it (`git status` stays clean). The blocks that need neither a download
+nor the set-up's demo also run for real, iterations capped, in a git repository that holds the clone's .gitignore.
+Every figure of the README (a number with a unit, or of iterations) is checked against the code that produces it.
 """
 from __future__ import annotations
 
@@ -19,6 +21,8 @@ import os
 import re
 import runpy
 import shlex
+import shutil
+import subprocess
 import sys
 import tomllib
 from pathlib import Path
@@ -43,6 +47,8 @@ DOWNLOADS = {"calibration.mat": "github.com/Waller-Lab/SpectralDiffuserCam",
 INPUTS = ("measurement", "frames", "calibration", "truth", "dead_pixels", "dark", "sweep", "wavelengths", "power",
           "exposure", "band_edges", "psf", "cube")     # clsdcam's options (argparse dests) that name files it reads
 OUTPUTS = ("output", "png", "outdir", "json")          # ... and those that name what it writes
+TOOL_OUTPUTS = ("out", "cache", "json")                # the dests of what a tools/ script writes
+FOLDERS = ("outdir", "out", "cache")                   # the output dests that name a folder, not a file or prefix
 RUN = {"simulate", "calibrate", "reconstruct", "batch", "export", "show"}   # cheap at the README's sizes
 SET_UP = {"python", "pip", *PYPROJECT["project"]["scripts"]}              # what the set-up puts in .venv/bin
 CAPS = {"iters": "--iters", "cold_iters": "--cold-iters"}                  # capped at 3 iterations when run
@@ -102,6 +108,7 @@ class Walk:
 
     def __init__(self, installed=(), downloads: bool = True):
         self.installed, self.produced, self.downloads = set(installed), set(), downloads
+        self.written: list[str] = []       # a file each output makes (one inside each folder)
 
     def problems(self, words: list[str]) -> list[str]:
         words = without_assignments(words)
@@ -133,7 +140,7 @@ class Walk:
         if parsed.command == "demo":                   # its folder depends on --quick
             fill_defaults(parsed)
         problems = [f"reads {path}: {why}" for path in values(parsed, INPUTS) if (why := self.unavailable(str(path)))]
-        self.produced |= {str(v) for v in values(parsed, OUTPUTS)}
+        self.record(parsed, OUTPUTS)
         return problems
 
     def python(self, args: list[str]) -> list[str]:
@@ -143,7 +150,11 @@ class Walk:
             return [] if importlib.util.find_spec(args[1]) else [f"no module {args[1]} in the venv"]
         if not (args[0].startswith("tools/") and (REPO / args[0]).is_file()):
             return [f"{args[0]}: not a tools/ script of the clone"]
-        return tool_parse_problems(args[0], args[1:])
+        parsed = tool_parse(args[0], args[1:])
+        if isinstance(parsed, str):
+            return [parsed]
+        self.record(parsed, TOOL_OUTPUTS)
+        return []
 
     def pip(self, args: list[str]) -> list[str]:
         if args[:1] != ["install"]:
@@ -169,6 +180,13 @@ class Walk:
         if parsed.plugin not in (None, *plugins):
             problems.append(f"--plugin {parsed.plugin}: not this package's napari plugin {plugins}")
         return problems + [f"reads {p}: {why}" for p in parsed.paths if (why := self.unavailable(p))]
+
+    def record(self, parsed: argparse.Namespace, dests):
+        """What the parsed command writes (the values of ``dests``): for later commands to read, and to check."""
+        for dest in dests:
+            for value in values(parsed, [dest]):
+                self.produced.add(str(value))
+                self.written.append(f"{value}/a-file" if dest in FOLDERS else str(value))
 
     def unavailable(self, path: str) -> str | None:
         """Why ``path`` (as the command reads it, from the clone) would not be there, or None."""
@@ -198,23 +216,49 @@ class Parsed(Exception):
     """Raised by ``ArgumentParser.parse_args`` once it has parsed: a tool stops before any work."""
 
 
-def tool_parse_problems(script: str, args: list[str]) -> list[str]:
-    """Whether ``python SCRIPT ARGS`` gets past the tool's own argparse (its ``main(argv)``), doing no work."""
+def tool_parse(script: str, args: list[str]) -> argparse.Namespace | str:
+    """What ``python SCRIPT ARGS`` parses to by the tool's own argparse (its ``main(argv)``), doing no work, or
+    why it does not get past it."""
     parse_args = argparse.ArgumentParser.parse_args
 
     def parse_and_stop(parser, argv=None, namespace=None):
         raise Parsed(parse_args(parser, argv, namespace))
 
     stderr = io.StringIO()
-    with mock.patch.object(argparse.ArgumentParser, "parse_args", parse_and_stop), \
-            mock.patch.object(sys, "path", [str(REPO / "tools"), *sys.path]), contextlib.redirect_stderr(stderr):
+    with mock.patch.object(argparse.ArgumentParser, "parse_args", parse_and_stop), tools_importable(), \
+            contextlib.redirect_stderr(stderr):
         try:
-            runpy.run_path(str(REPO / script), run_name="readme_check")["main"](args)
-        except Parsed:
-            return []
+            tool(script)["main"](args)
+        except Parsed as parsed:
+            return parsed.args[0]
         except SystemExit:
-            return [f"{script} does not accept it: {stderr.getvalue().strip().splitlines()[-1]}"]
-    return [f"{script}: main() returned without parsing its arguments"]
+            return f"{script} does not accept it: {stderr.getvalue().strip().splitlines()[-1]}"
+    return f"{script}: main() returned without parsing its arguments"
+
+
+def tools_importable():
+    """The tools/ folder first on sys.path, as when a tool runs: its scripts import each other."""
+    return mock.patch.object(sys, "path", [str(REPO / "tools"), *sys.path])
+
+
+def tool(script: str) -> dict:
+    """The globals of a tools/ script, run as a module (its main() not called)."""
+    return runpy.run_path(str(REPO / script), run_name="readme_check")
+
+
+def git_clone(folder: Path) -> Path:
+    """``folder`` made a git repository holding the clone's .gitignore (what `git status` reads)."""
+    folder.mkdir(exist_ok=True)
+    subprocess.run(["git", "init", "-q", str(folder)], check=True)
+    shutil.copy(REPO / ".gitignore", folder / ".gitignore")
+    return folder
+
+
+def untracked(clone: Path) -> list[str]:
+    """What `git status` in ``clone`` lists, the .gitignore it was given aside."""
+    status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=all"], cwd=clone, check=True,
+                            capture_output=True, text=True).stdout
+    return [line for line in status.splitlines() if line != "?? .gitignore"]
 
 
 def runnable_blocks() -> list[list[list[str]]]:
@@ -232,10 +276,13 @@ def problems_of(commands: list[list[str]], walk: Walk) -> list[str]:
 
 # ---- the tests ---------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("snippet", python_snippets())
-def test_readme_python_runs(snippet, tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    assert main(["simulate", "sim", "--size", "32x40", "--bands", "4", "--scene", "leds"]) == 0
+def test_readme_python_runs_and_leaves_git_status_clean(snippet, tmp_path, monkeypatch):
+    """After the README's `clsdcam simulate` (small), in a git repository with the clone's .gitignore."""
+    monkeypatch.chdir(git_clone(tmp_path / "clone"))
+    simulate = next(words for words in inline_commands() if words[:2] == [VENV + "clsdcam", "simulate"])
+    assert main([*simulate[1:], "--size", "32x40", "--bands", "4", "--scene", "leds"]) == 0
     exec(compile(snippet, "README.md", "exec"), {})
+    assert not untracked(Path.cwd())
 
 
 def test_the_readme_has_python_and_is_short():
@@ -252,15 +299,48 @@ def test_every_readme_command_runs_as_pasted_after_the_set_up_line():
     assert {"clsdcam", "python", "pip"} <= walk.installed and sum(map(len, blocks)) > 6
 
 
+def test_everything_the_readme_commands_write_is_ignored_by_git(tmp_path):
+    """`git status` in a clone after every README command: each file they write made, none listed."""
+    walk = Walk()
+    problems_of([words for block in bash_blocks() for words in block] + inline_commands(), walk)
+    clone = git_clone(tmp_path / "clone")
+    for path in walk.written:
+        (clone / path).parent.mkdir(parents=True, exist_ok=True)
+        (clone / path).touch()
+    assert len(walk.written) > 10 and not untracked(clone)
+
+
+FIGURE = r"\d[\d.,]*\s?(?:%|dB|°|×(?!\d)|ms\b|s\b|minutes?\b|frames/s|[MG]iB|(?:\w+ )?iterations\b)"
+
+
+def test_every_figure_of_the_readme_is_the_codes():
+    """The README's figures are those of the code that produces them (the demo's camera, the automatic stop,
+    bench_converged's reference), and it has no other (a measured figure lives in docs/ with its command)."""
+    from clsdcam.camera.prototype import N_BANDS, SENSOR_SHAPE, SPECTRAL_RANGE
+    from clsdcam.sim.filters import TILE
+    from clsdcam.solve.settings import AUTO_CAP, CONVERGE
+
+    with tools_importable():
+        reference = tool("tools/bench_converged.py")["TODAY"]
+    low, high = SPECTRAL_RANGE
+    claims = [f"{TILE}×{TILE} spectral filter array, {N_BANDS} bands over {low:g}–{high:g} nm, "
+              f"{SENSOR_SHAPE[0]}×{SENSOR_SHAPE[1]} sensor", f"within {100 * CONVERGE:g} % of that minimiser",
+              f"`--converge {CONVERGE:g}`, at most {AUTO_CAP})", f"against {reference['iters']} "
+              f"{reference['algorithm'].upper()} iterations"]
+    text = " ".join(re.sub(r"```.*?```", "", README.read_text(encoding="utf-8"), flags=re.S).split())
+    assert [claim for claim in claims if claim not in text] == []
+    assert [figure for figure in re.findall(FIGURE, text) if not any(figure in claim for claim in claims)] == []
+
+
 @pytest.mark.parametrize("block", runnable_blocks(), ids=lambda block: block[0][1] + "-" + block[0][2].split("/")[-1])
 def test_a_readme_block_runs_for_real(block, tmp_path, monkeypatch):
-    """In an empty clone beside ../shared (a link), each command through the CLI, its iterations capped at 3."""
+    """In an empty clone (a git repository with the clone's .gitignore) beside ../shared (a link), each command
+    through the CLI, its iterations capped at 3; then `git status` lists nothing."""
     if any("../shared/" in word for words in block for word in words):
         if not SHARED.exists():
             pytest.skip("../shared/data is not present")
         (tmp_path / "shared").symlink_to(SHARED)
-    clone = tmp_path / "clone"
-    clone.mkdir()
+    clone = git_clone(tmp_path / "clone")
     monkeypatch.chdir(clone)
     for words in block:
         args = [path for word in words[1:] for path in (sorted(glob.glob(word)) or [word])]
@@ -269,6 +349,7 @@ def test_a_readme_block_runs_for_real(block, tmp_path, monkeypatch):
         assert main(args + caps) == 0, shlex.join(words)
         for out in values(parsed, OUTPUTS):
             assert glob.glob(f"{out}*"), f"{shlex.join(words)} wrote no {out}"
+    assert not untracked(clone)
 
 
 def test_a_readme_block_runs_without_any_data():

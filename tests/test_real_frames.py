@@ -152,12 +152,13 @@ def test_an_option_that_took_the_measurement_says_so(sim, tmp_path, capsys):
 def test_demo_quick_writes_its_own_folder_and_help_names_both(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(["demo", "--quick", *SIZE, "--iters", "3", "--quiet"]) == 0
-    assert (tmp_path / "clsdcam-demo-quick" / "cube.h5").exists() and not (tmp_path / "clsdcam-demo").exists()
+    assert (tmp_path / "clsdcam-out" / "demo-quick" / "cube.h5").exists()
+    assert not (tmp_path / "clsdcam-out" / "demo").exists()
     capsys.readouterr()
     with pytest.raises(SystemExit):
         main(["demo", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "default clsdcam-demo/; with --quick clsdcam-demo-quick/" in text
+    assert "default clsdcam-out/demo/; with --quick clsdcam-out/demo-quick/" in text
 
 
 # ---- help text ------------------------------------------------------------------------------------------------
@@ -186,16 +187,29 @@ def test_every_argument_of_every_command_has_help():
     assert not [name for name, action in arguments if not (action.help or "").strip()]
 
 
-def test_commands_describe_themselves_and_help_shows_no_empty_default(capsys):
+def test_commands_describe_themselves_and_help_states_every_default_in_words(capsys):
+    """Every command and sub-command has a description; every option with a default states it, never as a
+    Python value ('()', 'None', a list)."""
+    import argparse
     import inspect
 
     from clsdcam.cli.options import build_parser
     from clsdcam.sim import simulate
 
     for name, parser in parsers(build_parser()):
-        if name in ("clsdcam reconstruct", "clsdcam simulate", "clsdcam check", "clsdcam devices"):
-            assert len(parser.description or "") > 100, name
+        assert len(parser.description or "") > (100 if name.count(" ") == 1 else 40), name
         text = parser.format_help()
-        assert "(default: ())" not in text and "(default: None)" not in text, name
+        assert not re.search(r"\(default: [(\[{<]|\(default: None\)", text), name
+        formatter = parser._get_formatter()
+        stated = [formatter._expand_help(a) for a in parser._actions if a.option_strings
+                  and not any(a.default is unset for unset in (None, False, argparse.SUPPRESS))]
+        assert all("default" in help_ for help_ in stated), name
     noise = next(a for a in dict(parsers(build_parser()))["clsdcam simulate"]._actions if a.dest == "noise")
     assert float(re.search(r"\(default (\S+)\)", noise.help)[1]) == inspect.signature(simulate).parameters["noise_var"].default
+
+
+def test_path_help_says_the_device_path_is_slow_on_a_cpu_device():
+    from clsdcam.cli.options import build_parser
+
+    path = next(a for a in dict(parsers(build_parser()))["clsdcam reconstruct"]._actions if a.dest == "path")
+    assert "on a CPU device such as PoCL it is ten to a hundred times slower than host" in " ".join(path.help.split())

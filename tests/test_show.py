@@ -107,6 +107,18 @@ def test_show_reads_a_frame_of_a_video_truth(video, tmp_path, capsys):
     assert printed_points(capsys.readouterr().out) == spectrum_points(truth, band_wavelengths(4))
 
 
+def test_show_of_a_video_truth_names_the_frames_and_calibration_beside_it(video, tmp_path, capsys):
+    """A simulator's truth records no inputs: the note names the files beside it, and given, they are drawn."""
+    assert main(["show", str(video / "truth.h5"), "--frame", "1", "-o", str(tmp_path / "t")]) == 0
+    printed = capsys.readouterr().out
+    assert (f"no measurement: the cube records none; give --measurement {video / 'frames.npy'}, beside it "
+            "(the simulated video: --frame N draws its frame N)") in printed
+    assert f"no calibration: the cube records none; give --calibration {video / 'calibration.h5'}" in printed
+    assert main(["show", str(video / "truth.h5"), "--frame", "1", "--measurement", str(video / "frames.npy"),
+                 "--calibration", str(video / "calibration.h5"), "-o", str(tmp_path / "t")]) == 0
+    assert "input picture" not in capsys.readouterr().out and (tmp_path / "t_input.png").exists()
+
+
 def test_show_reads_a_batch_frame_beside_its_truth_and_input(video, tmp_path, capsys):
     assert main(["show", str(video / "cubes.h5"), "--frame", "1", "--truth", str(video / "truth.h5"),
                  "-o", str(tmp_path / "b")]) == 0

@@ -26,7 +26,7 @@ import numpy as np
 
 from clsdcam.analysis import peak_wavelength
 from clsdcam.backends import get_backend
-from clsdcam.cli.options import size
+from clsdcam.cli.options import WORK, size
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.sim import noiseless_measurement, shared_data_dir, simulate
 from clsdcam.sim.scenes import source_lines, source_positions
@@ -249,13 +249,13 @@ def size_text(shape) -> str:
 
 def panel_parser(description: str, out: str, named_scenes: bool = True) -> argparse.ArgumentParser:
     """The options every tool on the panel's scenes takes: --scenes (the named scenes, unless ``named_scenes`` is
-    False), --size HxW (parsed to (H, W) as the CLI's), --bands, --out."""
+    False), --size HxW (parsed to (H, W) as the CLI's), --bands, --out (default WORK/``out``)."""
     parser = argparse.ArgumentParser(description=description)
     if named_scenes:
         parser.add_argument("--scenes", default=",".join(SCENES))
     parser.add_argument("--size", type=size(), default="320x448", metavar="HxW")
     parser.add_argument("--bands", type=int, default=64)
-    parser.add_argument("--out", default=out)
+    parser.add_argument("--out", default=f"{WORK}/{out}")
     return parser
 
 

@@ -38,6 +38,7 @@ import numpy as np
 
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text
 from bench_panel import panel_kinds, panel_scene, scene_plan
+from clsdcam.cli.options import WORK
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
 from clsdcam.solve.auto_weights import AUTO_AT
@@ -244,7 +245,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=None, help="replay a panel (default: fresh entropy)")
     parser.add_argument("--only", default="", metavar="I[,J...]", help="replay these scenes of the panel alone")
     parser.add_argument("--reference-iters", type=int, default=3000, help="each reference run's iterations")
-    parser.add_argument("--cache", default="converged-cache", help="folder of cached reference runs")
+    parser.add_argument("--cache", default=f"{WORK}/converged-cache", help="folder of cached reference runs")
     parser.add_argument("--weight-from", choices=("default", "today"), default="default",
                         help="whose --tv auto choice is the scene's weight (default: the default's)")
     parser.add_argument("--replay", default="0.1,0.05,0.03",

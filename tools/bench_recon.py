@@ -37,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from authors_baseline import AuthorsReplay, AuthorsSolver  # noqa: E402
 
+from clsdcam.cli.options import WORK  # noqa: E402
 from clsdcam.metrics import psnr, relative_error, spectral_angle  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
 from clsdcam.solve.solver import Settings, Solver  # noqa: E402
@@ -225,7 +226,7 @@ def main(argv=None) -> int:
                         help="time only this many published iterations and replay the rest (see above); 0: run them all")
     parser.add_argument("--reference-iters", type=int, default=1000, help="0 leaves the relative error out")
     parser.add_argument("--configs", default=",".join(CONFIGS), help=f"from: {', '.join(CONFIGS)}, {RANKED}N")
-    parser.add_argument("--out", default="bench-recon")
+    parser.add_argument("--out", default=f"{WORK}/bench-recon")
     args = parser.parse_args(argv)
     try:
         configs = {name: config(name) for name in args.configs.split(",")}

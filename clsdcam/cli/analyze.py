@@ -42,6 +42,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     """The ``analyze`` subcommand with one sub-choice per analysis (dest ``what``), each taking OUTDIR and the
     options it reads (USES)."""
     parser = subparsers.add_parser("analyze", help="the paper's resolution analyses (JSON + PNG per analysis)",
+                                   description="Reproduce the paper's resolution analyses on the simulated camera: "
+                                               "each writes NAME.json and NAME.png into OUTDIR; all runs every one "
+                                               "and also writes summary.md and report.html, printing the summary "
+                                               "beside the paper's values. Each analysis's --help shows its options.",
                                    epilog=examples("clsdcam analyze all analysis/",
                                                    "clsdcam analyze resolution out/ --size 320x448",
                                                    "clsdcam analyze spectral out/ --recon-size 64x96 --iters 200"))

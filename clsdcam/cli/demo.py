@@ -6,12 +6,12 @@ import time
 from pathlib import Path
 
 from ..errors import shape_text
-from .options import add_simulation_options, add_solver_options, examples, iterations
+from .options import WORK, add_simulation_options, add_solver_options, examples, iterations
 from .simulate import simulation_kwargs
 from .solve import print_accuracy, solve, write
 
 QUICK = {"size": (160, 224), "iters": 100}   # --quick: a first look (half the sensor's sides, a third the iterations)
-OUTDIR, QUICK_OUTDIR = "clsdcam-demo", "clsdcam-demo-quick"   # the default folders: the full demo's, --quick's
+OUTDIR, QUICK_OUTDIR = f"{WORK}/demo", f"{WORK}/demo-quick"   # the default folders: the full demo's, --quick's
 HALF_PEAK = 0.5     # a pixel passes a band when its filter transmits at least this fraction of the band's best pixel
 # the project's analyses, quoted by the note on the target (README, "What the demo shows"; measured 2026-11-25):
 PSF_RESOLUTION = "3.1 px"     # clsdcam analyze resolution: the simulated PSF's autocorrelation half-width at 70 %
@@ -19,7 +19,9 @@ TWO_POINT = "5–6 px"          # clsdcam analyze twopoint: two narrow-band poin
 
 
 def add_parser(subparsers):
-    p = subparsers.add_parser("demo", help="simulate the default scene, reconstruct it, report accuracy and time",
+    p = subparsers.add_parser("demo",
+                              help=f"simulate the default scene, reconstruct it into {OUTDIR}/, report accuracy "
+                                   "and time",
                               description=f"Simulate the default scene, reconstruct it, and write the cube, its "
                                           f"pictures and the simulation into OUTDIR (default {OUTDIR}/; with --quick "
                                           f"{QUICK_OUTDIR}/, so a first look leaves the full demo's folder alone); "

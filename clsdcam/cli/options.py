@@ -19,6 +19,7 @@ HELPERS = ("options", "solve")       # modules of this package that are not comm
 SCENES = ("target", "leds", "lines", "piecewise", "points", "sources", "realcube")   # clsdcam.sim.SCENES (tested)
 
 
+WORK = "clsdcam-out"    # what the demo and the tools write under by default, as the docs' examples do (.gitignore)
 OUTPUTS = ("output", "outdir", "png", "json")   # the destinations of options that name where a command writes
 CREATES_FOLDERS = "missing folders are created when it is written"
 
@@ -163,8 +164,10 @@ def add_backend_options(p: argparse.ArgumentParser):
     p.add_argument("--device", default=None,
                    help="OpenCL device: substring of platform or device name (default: PYOPENCL_CTX, else a GPU, else a CPU)")
     p.add_argument("--path", default="auto", choices=("auto", "host", "device"),
-                   help="which code runs the heavy primitives: host code on mapped buffers (CPU devices) or kernels "
-                        "(default auto: host on CPU devices, device elsewhere)")
+                   help="which code runs the heavy primitives: host code on mapped buffers (CPU devices only) or "
+                        "kernels with the FFT on the device (what a GPU runs; on a CPU device such as PoCL it is ten "
+                        "to a hundred times slower than host: docs/benchmarks.md) (default auto: host on CPU "
+                        "devices, device elsewhere)")
     p.add_argument("--fft", default="auto", choices=("auto", "host", "reikna", "vkfft"),
                    help="FFT engine (default auto: host pocketfft on the host path, vkfft if installed else reikna on "
                         "the device path)")

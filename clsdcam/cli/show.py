@@ -17,6 +17,10 @@ EXAMPLES = examples("clsdcam show cube.h5                           # cube_false
 PICTURES = ("Draw PREFIX_falsecolour.png, _projections.png and _spectra.png (numbered on the false colour); "
             "_convergence.png when the file holds the solver's history; _input.png (the raw frame, the PSF and the "
             "filter array's layout) when the measurement or the calibration is known. See docs/pictures.md.")
+# what `clsdcam simulate` writes beside its truth.h5, which records no inputs: named when show finds them there
+SIMULATED = {"measurement": {"measurement.npy": "the simulated frame",
+                             "frames.npy": "the simulated video: --frame N draws its frame N"},
+             "calibration": {"calibration.h5": "the simulated calibration"}}
 
 
 def add_parser(subparsers):
@@ -119,15 +123,23 @@ def load(reader, given: str | None, paths: list[str], what: str, cube, notes: li
         return reader([given])
     found = [locate(p, cube) for p in paths]
     if not paths or None in found:
-        where = f"{paths[found.index(None)]} (recorded) is not there nor beside the cube" if paths else \
-            "the cube records none"
-        notes.append(f"input picture: no {what}: {where}; give --{what}")
+        where = f"{paths[found.index(None)]} (recorded) is not there nor beside the cube; give --{what}" if paths \
+            else unrecorded(what, cube)
+        notes.append(f"input picture: no {what}: {where}")
         return None, ""
     try:
         return reader(found)
     except InputError as exc:
         notes.append(f"input picture: no {what}: {exc}")
         return None, ""
+
+
+def unrecorded(what: str, cube) -> str:
+    """The note on a cube that records no ``what``: which option to give, naming the simulator's file of it
+    (SIMULATED) when one lies beside the cube."""
+    beside = [(path, text) for name, text in SIMULATED[what].items() if (path := Path(cube).parent / name).is_file()]
+    hint = f" {beside[0][0]}, beside it ({beside[0][1]})" if beside else ""
+    return f"the cube records none; give --{what}{hint}"
 
 
 def locate(path: str, cube) -> Path | None:
