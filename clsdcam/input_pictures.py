@@ -52,7 +52,7 @@ def input_figure(inputs: Inputs):
     spectral = inputs.filters is not None and len(inputs.filters) > 1
     panels = [draw for draw, known in ((_frame_panel, inputs.frame is not None), (_psf_panel, inputs.psf is not None),
                                        (_filter_panel, spectral)) if known]
-    fig = new_figure(figsize=(5 * len(panels), 4.6))
+    fig = new_figure(figsize=(5 * len(panels), 4.6), layout="compressed")
     for ax, draw in zip(fig.subplots(1, len(panels), squeeze=False)[0], panels):
         draw(fig, ax, inputs)
         ax.set(xlabel="x (px)", ylabel="y (px)")

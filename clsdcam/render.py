@@ -136,12 +136,13 @@ def false_colour(cube, wavelengths) -> np.ndarray:
 
 
 # ---- figures ---------------------------------------------------------------------------
-def new_figure(**kwargs):
-    """A matplotlib Figure on its own Agg canvas (no pyplot state, nothing to close)."""
+def new_figure(layout="constrained", **kwargs):
+    """A matplotlib Figure on its own Agg canvas (no pyplot state, nothing to close); ``layout="compressed"`` for a
+    row of images of fixed aspect, whose titles and labels constrained layout can push off the canvas."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(layout="constrained", **kwargs)
+    fig = Figure(layout=layout, **kwargs)
     FigureCanvasAgg(fig)
     return fig
 
