@@ -20,6 +20,7 @@ from .picks import spectrum_points
 OBSERVER = "CIE 1931 2 Degree Standard Observer"
 PERCENTILE = 99.5          # display white: this percentile of the brightest channel
 SINGLE_BAND_WIDTH = 10.0   # nm, nominal width of a lone band (only used for plotting)
+TRUTH_KEYS = (("-", "solid: the cube"), ("--", "dashed: the truth"))   # the legend's key beside a truth
 SPECTRUM_COLOURS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:brown")
 
 
@@ -193,12 +194,23 @@ def spectra_figure(cube, wavelengths, image, points, truth=None):
                         fontweight="bold", path_effects=outline)
         ax_spec.plot(wavelengths, cube[:, y, x], ".-", color=colour, label=f"{i + 1}: (y={y}, x={x})")
         if truth is not None:
-            ax_spec.plot(wavelengths, truth[:, y, x], "--", color=colour, label=f"{i + 1}: truth")
+            ax_spec.plot(wavelengths, truth[:, y, x], "--", color=colour)
     ax_spec.set(title="spectra", xlabel="wavelength (nm)", ylabel="intensity")
     ax_spec.grid(alpha=0.3)
     if points:
-        ax_spec.legend(fontsize="small", ncols=2 if truth is not None else 1)
+        legend_beside(ax_spec, truth is not None)
     return fig
+
+
+def legend_beside(ax, with_truth: bool):
+    """The legend of ``ax``'s labelled curves right of its axes, where it hides none of them; ``with_truth``: then
+    what the solid and dashed lines are (TRUTH_KEYS, grey)."""
+    from matplotlib.lines import Line2D
+
+    keys = TRUTH_KEYS if with_truth else ()
+    handles = ax.get_legend_handles_labels()[0] + [Line2D([], [], ls=style, color="0.3", label=text)
+                                                   for style, text in keys]
+    ax.legend(handles=handles, fontsize="small", loc="upper left", bbox_to_anchor=(1.02, 1), borderaxespad=0)
 
 
 def _light_colour(spectrum, weights) -> tuple:
@@ -225,10 +237,10 @@ def profiles_figure(image, grey, point, truth=None):
                                                f"column x={x}")):
         ax_prof.plot(profile, color=colour, label=label)
         if reference is not None:
-            ax_prof.plot(reference, "--", color=colour, label=f"{label}: truth")
+            ax_prof.plot(reference, "--", color=colour)
     ax_prof.set(title="line profiles", xlabel="position (px)", ylabel="intensity")
     ax_prof.grid(alpha=0.3)
-    ax_prof.legend(fontsize="small")
+    legend_beside(ax_prof, truth is not None)
     return fig
 
 

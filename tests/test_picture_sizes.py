@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from clsdcam.input_pictures import Inputs, input_figure
+from clsdcam.picks import spectrum_points
 from clsdcam.render import false_colour, projections_figure, spectra_figure
 from clsdcam.sim.scenes import make_scene
 from clsdcam.sim.spectra import band_wavelengths
@@ -48,3 +49,30 @@ def test_the_input_pictures_titles_and_labels_lie_on_the_canvas(shape):
     fig = input_figure(simulated_inputs(shape))
     assert len(fig.axes[2].get_title().splitlines()) == 2       # the filter panel's title is drawn
     assert off_canvas(fig) == []
+
+
+def legend_hides_a_curve(fig, ax) -> bool:
+    """Whether ``ax``'s legend lies over its axes (a curve may run under it), once drawn."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    return ax.get_legend().get_window_extent(renderer).overlaps(ax.get_window_extent(renderer))
+
+
+@pytest.mark.parametrize("shape", SIZES)
+def test_the_spectra_legend_hides_no_curve_and_lies_on_the_canvas(shape):
+    truth, wavelengths, image = target(shape)
+    points = spectrum_points(truth, wavelengths)
+    fig = spectra_figure(truth * 0.8, wavelengths, image, points, truth)
+    assert not legend_hides_a_curve(fig, fig.axes[1])
+    legend = [text.get_text() for text in fig.axes[1].get_legend().get_texts()]
+    assert len(legend) == len(points) + 2 and "dashed: the truth" in legend     # a key per point, and the styles
+    assert off_canvas(fig) == []
+
+
+def test_the_profiles_legend_hides_no_curve():
+    from clsdcam.render import profiles_figure
+
+    grey = np.random.default_rng(1).random((48, 64))
+    fig = profiles_figure(grey, grey, (20, 30), truth=grey)
+    assert not legend_hides_a_curve(fig, fig.axes[1]) and off_canvas(fig) == []
+
