@@ -60,14 +60,16 @@ def input_figure(inputs: Inputs):
 
 
 def _frame_panel(fig, ax, inputs: Inputs):
-    fig.colorbar(ax.imshow(inputs.frame, cmap="gray", interpolation="nearest"), ax=ax, shrink=0.8)
+    fig.colorbar(ax.imshow(inputs.frame, cmap="gray", interpolation="nearest"), ax=ax, shrink=0.8,
+                 label="raw value (the measurement's units, as recorded)")
     ax.set_title(f"raw frame b\n{inputs.frame_source}", fontsize="medium")
 
 
 def _psf_panel(fig, ax, inputs: Inputs):
     from matplotlib.colors import PowerNorm
 
-    ax.imshow(np.clip(inputs.psf, 0, None), cmap="gray", norm=PowerNorm(0.5))
+    image = ax.imshow(np.clip(inputs.psf, 0, None), cmap="gray", norm=PowerNorm(0.5))
+    fig.colorbar(image, ax=ax, shrink=0.8, label="intensity (relative units, √ scale)")
     ax.set_title(f"PSF h (√ scale)\n{inputs.calibration_source}", fontsize="medium")
 
 

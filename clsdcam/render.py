@@ -20,6 +20,7 @@ from .picks import spectrum_points
 OBSERVER = "CIE 1931 2 Degree Standard Observer"
 PERCENTILE = 99.5          # display white: this percentile of the brightest channel
 SINGLE_BAND_WIDTH = 10.0   # nm, nominal width of a lone band (only used for plotting)
+RADIANCE = "radiance (calibration units)"    # a cube's values: the calibration's units (docs/conventions.md)
 TRUTH_KEYS = (("-", "solid: the cube"), ("--", "dashed: the truth"))   # the legend's key beside a truth
 SPECTRUM_COLOURS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:brown")
 
@@ -168,11 +169,11 @@ def projections_figure(cube, wavelengths, image):
     ax_img.set(title="false colour (CIE 1931 → sRGB)", xlabel="x (px)", ylabel="y (px)")
     mesh = ax_x.pcolormesh(np.arange(w + 1) - 0.5, edges, cube.sum(axis=1), shading="flat")
     ax_x.set(title="x–λ projection (sum over y)", xlabel="x (px)", ylabel="wavelength (nm)")
-    fig.colorbar(mesh, ax=ax_x)
+    fig.colorbar(mesh, ax=ax_x, label=f"{RADIANCE}, summed over y")
     mesh = ax_y.pcolormesh(edges, np.arange(h + 1) - 0.5, cube.sum(axis=2).T, shading="flat")
     ax_y.set(title="y–λ projection (sum over x)", xlabel="wavelength (nm)", ylabel="y (px)")
     ax_y.invert_yaxis()
-    fig.colorbar(mesh, ax=ax_y)
+    fig.colorbar(mesh, ax=ax_y, label=f"{RADIANCE}, summed over x")
     return fig
 
 
@@ -195,7 +196,7 @@ def spectra_figure(cube, wavelengths, image, points, truth=None):
         ax_spec.plot(wavelengths, cube[:, y, x], ".-", color=colour, label=f"{i + 1}: (y={y}, x={x})")
         if truth is not None:
             ax_spec.plot(wavelengths, truth[:, y, x], "--", color=colour)
-    ax_spec.set(title="spectra", xlabel="wavelength (nm)", ylabel="intensity")
+    ax_spec.set(title="spectra", xlabel="wavelength (nm)", ylabel=RADIANCE)
     ax_spec.grid(alpha=0.3)
     if points:
         legend_beside(ax_spec, truth is not None)
@@ -238,7 +239,7 @@ def profiles_figure(image, grey, point, truth=None):
         ax_prof.plot(profile, color=colour, label=label)
         if reference is not None:
             ax_prof.plot(reference, "--", color=colour)
-    ax_prof.set(title="line profiles", xlabel="position (px)", ylabel="intensity")
+    ax_prof.set(title="line profiles", xlabel="position (px)", ylabel=RADIANCE)
     ax_prof.grid(alpha=0.3)
     legend_beside(ax_prof, truth is not None)
     return fig

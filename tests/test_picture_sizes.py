@@ -1,6 +1,8 @@
 """Issue 48: the pictures are readable at every size the simulator makes, from 24×32 to the prototype's 320×448:
 every title and label lies on the canvas, no legend hides a curve, every colour bar says its units, and the spectra
 are numbered in the order the demo's scene is described (red, green, blue, white)."""
+import re
+
 import numpy as np
 import pytest
 
@@ -76,3 +78,17 @@ def test_the_profiles_legend_hides_no_curve():
     fig = profiles_figure(grey, grey, (20, 30), truth=grey)
     assert not legend_hides_a_curve(fig, fig.axes[1]) and off_canvas(fig) == []
 
+
+def colour_bar_labels(fig) -> list[str]:
+    """The label of each colour bar of ``fig``."""
+    return [cax.get_ylabel() or cax.get_xlabel() for cax in fig.axes if cax.get_label() == "<colorbar>"]
+
+
+@pytest.mark.parametrize("figure", ["input", "projections"])
+def test_every_colour_bar_says_what_its_values_are_in(figure):
+    truth, wavelengths, image = target((48, 64))
+    fig = input_figure(simulated_inputs((48, 64))) if figure == "input" else \
+        projections_figure(truth, wavelengths, image)
+    found = colour_bar_labels(fig)
+    assert len(found) == (3 if figure == "input" else 2)
+    assert all(re.search(r"\(.*(units|nm).*\)", label) for label in found), found   # units in brackets
