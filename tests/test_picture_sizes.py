@@ -1,6 +1,6 @@
 """Issue 48: the pictures are readable at every size the simulator makes, from 24×32 to the prototype's 320×448:
-every title and label lies on the canvas, no legend hides a curve, every colour bar says its units, and the spectra
-are numbered in the order the demo's scene is described (red, green, blue, white)."""
+every title and label lies on the canvas, no legend hides a curve and every colour bar says its units (the spectra's
+numbering, red, green, blue, white: tests/test_show.py)."""
 import re
 
 import numpy as np
