@@ -9,6 +9,7 @@ import numpy as np
 
 from .render import new_figure, save_figure
 
+PSF_TICKS = (0.0, 0.05, 0.2, 0.5, 1.0)   # fractions of the PSF's peak, nearly evenly spaced on its √ colour bar
 FILTER_CROP = 32    # px: the filter-layout panel shows this square at the sensor's centre (2×2 tiles of the prototype)
 
 
@@ -46,13 +47,13 @@ def save_input_picture(prefix, inputs: Inputs) -> list[Path]:
 
 def input_figure(inputs: Inputs):
     """One panel per known part: the raw frame b (grey, linear, with its colour bar in the frame's units), the PSF
-    h (grey on a √ scale, so that its faint caustics show) and, for a spectral calibration (K > 1), the filter
-    array's layout: the wavelength of each pixel's most transmitted band, λ[argmax_k F_k(y, x)], on a
-    FILTER_CROP-pixel square at the sensor's centre."""
+    h (grey, as a fraction of its peak on a √ scale, so that its faint caustics show) and, for a spectral
+    calibration (K > 1), the filter array's layout: the wavelength of each pixel's most transmitted band,
+    λ[argmax_k F_k(y, x)], on a FILTER_CROP-pixel square at the sensor's centre."""
     spectral = inputs.filters is not None and len(inputs.filters) > 1
     panels = [draw for draw, known in ((_frame_panel, inputs.frame is not None), (_psf_panel, inputs.psf is not None),
                                        (_filter_panel, spectral)) if known]
-    fig = new_figure(figsize=(5 * len(panels), 4.6))
+    fig = new_figure(figsize=(5 * len(panels), 4.6), layout="compressed")
     for ax, draw in zip(fig.subplots(1, len(panels), squeeze=False)[0], panels):
         draw(fig, ax, inputs)
         ax.set(xlabel="x (px)", ylabel="y (px)")
@@ -60,14 +61,17 @@ def input_figure(inputs: Inputs):
 
 
 def _frame_panel(fig, ax, inputs: Inputs):
-    fig.colorbar(ax.imshow(inputs.frame, cmap="gray", interpolation="nearest"), ax=ax, shrink=0.8)
+    fig.colorbar(ax.imshow(inputs.frame, cmap="gray", interpolation="nearest"), ax=ax, shrink=0.8,
+                 label="raw value (measurement units)")
     ax.set_title(f"raw frame b\n{inputs.frame_source}", fontsize="medium")
 
 
 def _psf_panel(fig, ax, inputs: Inputs):
     from matplotlib.colors import PowerNorm
 
-    ax.imshow(np.clip(inputs.psf, 0, None), cmap="gray", norm=PowerNorm(0.5))
+    psf = np.clip(inputs.psf, 0, None)
+    image = ax.imshow(psf / (psf.max() or 1.0), cmap="gray", norm=PowerNorm(0.5, vmin=0.0, vmax=1.0))
+    fig.colorbar(image, ax=ax, shrink=0.8, ticks=PSF_TICKS, label="intensity (fraction of its peak, √ scale)")
     ax.set_title(f"PSF h (√ scale)\n{inputs.calibration_source}", fontsize="medium")
 
 

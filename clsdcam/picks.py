@@ -14,7 +14,9 @@ For a cube v (K, H, W):
    pixel: the maximum of the Euclidean distance from the group's pixels to the nearest pixel outside the group
    (the middle of its widest part, away from edges where a reconstruction blurs two regions together), the
    brightest among equals, and of those the nearest to their mean position;
-4. ordered by the wavelength of their spectrum's peak, bluest first.
+4. numbered as the lights are named (the demo's target: red, green, blue, white): the narrow lights first, then the
+   broad ones (at least BROAD of their bands reach half their peak: white light), each by the wavelength of the
+   spectrum's peak, the longest first.
 """
 from __future__ import annotations
 
@@ -28,11 +30,12 @@ CLUSTER_ANGLE = 25.0    # degrees: spectra within this angle of a group's leader
 MAX_GROUPS = 32         # groups formed at most
 MIN_SHARE = 0.01        # a group must hold this fraction of the lit pixels to be drawn
 MAX_POINTS = 6          # points drawn by default (one colour each)
+BROAD = 0.5             # a light is broad (white) when this fraction of its bands reach half its peak
 
 
 def spectrum_points(cube, wavelengths=None, n: int = MAX_POINTS) -> list[tuple[int, int]]:
     """Up to ``n`` (y, x) pixels of a (K, H, W) cube, one per distinct lit region (see the module docstring),
-    ordered by the wavelength of their spectrum's peak (by its band without ``wavelengths``); [] when nothing is
+    numbered as the lights are named (:func:`light_order`; by band without ``wavelengths``); [] when nothing is
     lit."""
     cube = np.asarray(cube, dtype=np.float64)
     peak = cube.max(axis=0)
@@ -45,7 +48,14 @@ def spectrum_points(cube, wavelengths=None, n: int = MAX_POINTS) -> list[tuple[i
     kept = [g for g in np.argsort(-sizes, kind="stable")[:n] if sizes[g] >= max(1, MIN_SHARE * lit.size)]
     points = [central_pixel(lit[labels == g], peak) for g in kept]
     order = np.arange(cube.shape[0]) if wavelengths is None else np.asarray(wavelengths, np.float64)
-    return sorted(points, key=lambda p: order[np.argmax(cube[:, p[0], p[1]])])
+    return sorted(points, key=lambda p: light_order(cube[:, p[0], p[1]], order))
+
+
+def light_order(spectrum: np.ndarray, wavelengths: np.ndarray) -> tuple[bool, float]:
+    """The sort key that numbers lights as they are named (red, green, blue, white): narrow before broad (at least
+    BROAD of the bands at half the peak or more), then the longest peak wavelength first."""
+    broad = np.mean(spectrum >= 0.5 * spectrum.max()) >= BROAD
+    return bool(broad), -float(wavelengths[np.argmax(spectrum)])
 
 
 def spectral_groups(spectra: np.ndarray, brightness: np.ndarray) -> np.ndarray:

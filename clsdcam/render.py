@@ -20,6 +20,8 @@ from .picks import spectrum_points
 OBSERVER = "CIE 1931 2 Degree Standard Observer"
 PERCENTILE = 99.5          # display white: this percentile of the brightest channel
 SINGLE_BAND_WIDTH = 10.0   # nm, nominal width of a lone band (only used for plotting)
+RADIANCE = "radiance (calibration units)"    # a cube's values: the calibration's units (docs/conventions.md)
+TRUTH_KEYS = (("-", "solid: the cube"), ("--", "dashed: the truth"))   # the legend's key beside a truth
 SPECTRUM_COLOURS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:brown")
 
 
@@ -136,12 +138,13 @@ def false_colour(cube, wavelengths) -> np.ndarray:
 
 
 # ---- figures ---------------------------------------------------------------------------
-def new_figure(**kwargs):
-    """A matplotlib Figure on its own Agg canvas (no pyplot state, nothing to close)."""
+def new_figure(layout="constrained", **kwargs):
+    """A matplotlib Figure on its own Agg canvas (no pyplot state, nothing to close); ``layout="compressed"`` for a
+    row of images of fixed aspect, whose titles and labels constrained layout can push off the canvas."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(layout="constrained", **kwargs)
+    fig = Figure(layout=layout, **kwargs)
     FigureCanvasAgg(fig)
     return fig
 
@@ -166,11 +169,11 @@ def projections_figure(cube, wavelengths, image):
     ax_img.set(title="false colour (CIE 1931 → sRGB)", xlabel="x (px)", ylabel="y (px)")
     mesh = ax_x.pcolormesh(np.arange(w + 1) - 0.5, edges, cube.sum(axis=1), shading="flat")
     ax_x.set(title="x–λ projection (sum over y)", xlabel="x (px)", ylabel="wavelength (nm)")
-    fig.colorbar(mesh, ax=ax_x)
+    fig.colorbar(mesh, ax=ax_x, label=f"{RADIANCE}, summed over y")
     mesh = ax_y.pcolormesh(edges, np.arange(h + 1) - 0.5, cube.sum(axis=2).T, shading="flat")
     ax_y.set(title="y–λ projection (sum over x)", xlabel="wavelength (nm)", ylabel="y (px)")
     ax_y.invert_yaxis()
-    fig.colorbar(mesh, ax=ax_y)
+    fig.colorbar(mesh, ax=ax_y, label=f"{RADIANCE}, summed over x")
     return fig
 
 
@@ -192,12 +195,23 @@ def spectra_figure(cube, wavelengths, image, points, truth=None):
                         fontweight="bold", path_effects=outline)
         ax_spec.plot(wavelengths, cube[:, y, x], ".-", color=colour, label=f"{i + 1}: (y={y}, x={x})")
         if truth is not None:
-            ax_spec.plot(wavelengths, truth[:, y, x], "--", color=colour, label=f"{i + 1}: truth")
-    ax_spec.set(title="spectra", xlabel="wavelength (nm)", ylabel="intensity")
+            ax_spec.plot(wavelengths, truth[:, y, x], "--", color=colour)
+    ax_spec.set(title="spectra", xlabel="wavelength (nm)", ylabel=RADIANCE)
     ax_spec.grid(alpha=0.3)
     if points:
-        ax_spec.legend(fontsize="small", ncols=2 if truth is not None else 1)
+        legend_beside(ax_spec, truth is not None)
     return fig
+
+
+def legend_beside(ax, with_truth: bool):
+    """The legend of ``ax``'s labelled curves right of its axes, where it hides none of them; ``with_truth``: then
+    what the solid and dashed lines are (TRUTH_KEYS, grey)."""
+    from matplotlib.lines import Line2D
+
+    keys = TRUTH_KEYS if with_truth else ()
+    handles = ax.get_legend_handles_labels()[0] + [Line2D([], [], ls=style, color="0.3", label=text)
+                                                   for style, text in keys]
+    ax.legend(handles=handles, fontsize="small", loc="upper left", bbox_to_anchor=(1.02, 1), borderaxespad=0)
 
 
 def _light_colour(spectrum, weights) -> tuple:
@@ -224,10 +238,10 @@ def profiles_figure(image, grey, point, truth=None):
                                                f"column x={x}")):
         ax_prof.plot(profile, color=colour, label=label)
         if reference is not None:
-            ax_prof.plot(reference, "--", color=colour, label=f"{label}: truth")
-    ax_prof.set(title="line profiles", xlabel="position (px)", ylabel="intensity")
+            ax_prof.plot(reference, "--", color=colour)
+    ax_prof.set(title="line profiles", xlabel="position (px)", ylabel=RADIANCE)
     ax_prof.grid(alpha=0.3)
-    ax_prof.legend(fontsize="small")
+    legend_beside(ax_prof, truth is not None)
     return fig
 
 

@@ -33,7 +33,20 @@ def quadrant_of(shape, point) -> int | None:
 def test_spectrum_points_take_one_pixel_of_each_light_of_the_target(shape, bands):
     wavelengths = band_wavelengths(bands)
     points = spectrum_points(make_scene("target", shape, wavelengths), wavelengths)
-    assert [quadrant_of(shape, p) for p in points] == [2, 1, 3, 0]    # blue, green, white, red: by peak wavelength
+    assert [quadrant_of(shape, p) for p in points] == [0, 1, 2, 3]    # red, green, blue, white: as the README names them
+
+
+@pytest.mark.parametrize("bands", [4, 16, 64])
+def test_spectrum_points_number_narrow_lights_reddest_first_then_broad_ones(bands):
+    """Narrow lights by the wavelength of their peak, the longest first, then broad ones (white) whatever their peak:
+    the light in each of four squares, left to right, is broad (peak mid-range), at the bluest band, at the reddest
+    and at a quarter of the range."""
+    wavelengths = band_wavelengths(bands)
+    lights = [1.0 - 0.5 * np.abs(np.linspace(-1, 1, bands)), *np.eye(bands)[[0, -1, bands // 4]]]
+    cube = np.zeros((bands, 12, 40))
+    for i, spectrum in enumerate(lights):
+        cube[:, 2:10, 10 * i + 2:10 * i + 8] = spectrum[:, None, None]
+    assert [x // 10 for _, x in spectrum_points(cube, wavelengths)] == [2, 3, 1, 0]
 
 
 def test_spectrum_points_of_a_dark_cube_and_a_single_band():
@@ -183,7 +196,7 @@ def test_spectrum_points_of_a_scene_lit_in_fewer_pixels_than_the_percentile():
     cube = np.zeros((3, 100, 100))
     cube[:, 10, 20] = [1.0, 0.0, 0.0]
     cube[:, 70, 80] = [0.0, 0.0, 0.8]
-    assert spectrum_points(cube, [650.0, 550.0, 450.0]) == [(70, 80), (10, 20)]
+    assert spectrum_points(cube, [650.0, 550.0, 450.0]) == [(10, 20), (70, 80)]
 
 
 def test_each_spectrum_is_drawn_in_the_colour_of_its_light():
@@ -191,8 +204,8 @@ def test_each_spectrum_is_drawn_in_the_colour_of_its_light():
 
     wavelengths = band_wavelengths(16)
     truth = make_scene("target", (32, 40), wavelengths)
-    points = spectrum_points(truth, wavelengths)                        # blue, green, white, red
+    points = spectrum_points(truth, wavelengths)                        # red, green, blue, white
     ax = spectra_figure(truth, wavelengths, false_colour(truth, wavelengths), points, truth).axes[1]
     colours = [np.array(line.get_color()) for line in ax.get_lines()[::2]]
-    assert [int(np.argmax(c)) for c in colours[:2] + colours[3:]] == [2, 1, 0]
-    assert np.ptp(colours[2]) == 0                                      # white light: grey
+    assert [int(np.argmax(c)) for c in colours[:3]] == [0, 1, 2]
+    assert np.ptp(colours[3]) == 0                                      # white light: grey
