@@ -1,8 +1,8 @@
 """Pictures of a reconstructed cube: false colour, sum projections, spectra, convergence.
 
 A cube is a (K, H, W) array with band wavelengths (K,) in nm (any K ≥ 1, non-uniform or
-unsorted spacing, possibly outside the visible range). Colour matching comes from
-``colour-science`` (CIE 1931 2° observer). matplotlib and colour are imported inside the
+unsorted spacing, possibly outside the visible range). Colour matching is the CIE 1931 2° observer's, to sRGB
+(:mod:`clsdcam.colorimetry`: a shipped table, no colour-science). matplotlib is imported inside the
 functions so that ``import clsdcam.render`` stays cheap; figures are drawn on an Agg canvas
 of their own (pyplot's global state and backend are left alone, so nothing leaks in batch
 runs) and every PNG is written through :func:`clsdcam.io.atomic_output`.
@@ -17,7 +17,6 @@ from .errors import InputError
 from .io import atomic_output
 from .picks import spectrum_points
 
-OBSERVER = "CIE 1931 2 Degree Standard Observer"
 PERCENTILE = 99.5          # display white: this percentile of the brightest channel
 SINGLE_BAND_WIDTH = 10.0   # nm, nominal width of a lone band (only used for plotting)
 RADIANCE = "radiance (calibration units)"    # a cube's values: the calibration's units (docs/conventions.md)
@@ -87,28 +86,25 @@ def _rgb_weights(wavelengths):
     inside the CMF range).
 
     w_k = (x̄, ȳ, z̄)(λ_k) · Δλ_k · A, with the CIE 1931 2° CMFs linearly interpolated at λ_k (zero
-    outside their tabulated range) and A the 3×3 matrix of ``colour.XYZ_to_sRGB`` (linear, no
-    encoding) with the equal-energy illuminant E as the source white, so that a spectrally flat
-    scene renders as neutral grey (the CAT02 adaptation E → D65 is part of A).
+    outside their tabulated range) and A the 3×3 XYZ → linear sRGB matrix with the equal-energy
+    illuminant E as the source white, so that a spectrally flat scene renders as neutral grey (the
+    CAT02 adaptation E → D65 is part of A: :func:`clsdcam.colorimetry.xyz_to_linear_srgb`).
     """
-    import colour
+    from .colorimetry import colour_matching_functions, xyz_to_linear_srgb
 
     if wavelengths.size == 1:
         return None
-    cmfs = colour.MSDS_CMFS[OBSERVER]
-    cmf = np.stack([np.interp(wavelengths, cmfs.wavelengths, cmfs.values[:, i], left=0.0, right=0.0)
-                    for i in range(3)], axis=1)
+    table_nm, table = colour_matching_functions()
+    cmf = np.stack([np.interp(wavelengths, table_nm, table[:, i], left=0.0, right=0.0) for i in range(3)], axis=1)
     if not cmf.any():
         return None
-    white_e = colour.CCS_ILLUMINANTS[OBSERVER]["E"]
-    xyz_to_rgb = colour.XYZ_to_sRGB(np.eye(3), illuminant=white_e, apply_cctf_encoding=False)  # rows: RGB of X, Y, Z
-    return (cmf * band_widths(wavelengths)[:, None]) @ xyz_to_rgb
+    return (cmf * band_widths(wavelengths)[:, None]) @ xyz_to_linear_srgb()
 
 
 def _to_display(rgb):
     """Linear (H, W, 3) → displayable sRGB in [0, 1]: clip negatives, divide by the PERCENTILE-th
     percentile of max(R, G, B) (the maximum if that is 0), clip to 1, apply the sRGB encoding."""
-    import colour
+    from .colorimetry import srgb_encode
 
     rgb = np.clip(rgb, 0.0, None)
     brightest = rgb.max(axis=-1)
@@ -116,7 +112,7 @@ def _to_display(rgb):
     scale = scale if scale > 0 else brightest.max()
     if scale > 0:
         rgb = np.clip(rgb / scale, 0.0, 1.0)
-    return np.asarray(colour.cctf_encoding(rgb, function="sRGB"), dtype=np.float64)
+    return srgb_encode(rgb)
 
 
 def false_colour(cube, wavelengths) -> np.ndarray:

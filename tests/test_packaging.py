@@ -27,7 +27,7 @@ def test_ci_runs_the_readme_test_command():
     assert readme_commands()[1] in ci_lines
 
 
-def test_wheel_ships_every_kernel_and_the_installed_package_finds_them(tmp_path):
+def test_wheel_ships_every_kernel_and_the_colour_table_and_the_installed_package_finds_them(tmp_path):
     subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp_path), str(REPO)],
                    check=True, capture_output=True, timeout=600)
     (wheel,) = tmp_path.glob("clsdcam-*.whl")
@@ -35,14 +35,15 @@ def test_wheel_ships_every_kernel_and_the_installed_package_finds_them(tmp_path)
     sources = sorted(p.name for p in (REPO / "kernels").glob("*.cl"))
     assert sources, "no kernels/*.cl in the source tree"
     assert {f"clsdcam/kernels/{name}" for name in sources} <= names
-    assert "clsdcam/kernels/__init__.py" in names
+    assert {"clsdcam/kernels/__init__.py", "clsdcam/cie1931_2deg.csv"} <= names
     site = tmp_path / "site"
     subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(site), str(wheel)],
                    check=True, capture_output=True, timeout=600)
-    code = ("import clsdcam, clsdcam.backends.cl_program as p; "
-            "print(clsdcam.__file__); print(p.kernel_dir()); print(len(p.source()))")
+    code = ("import clsdcam, clsdcam.backends.cl_program as p, clsdcam.colorimetry as c; "
+            "print(clsdcam.__file__); print(p.kernel_dir()); print(len(p.source())); "
+            "print(len(c.colour_matching_functions()[0]))")
     out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(site)},
                          capture_output=True, text=True, check=True).stdout.split()
     assert out[0].startswith(str(site)) and out[1].startswith(str(site)), out
-    assert int(out[2]) > 1000
+    assert int(out[2]) > 1000 and out[3] == "471"
 
