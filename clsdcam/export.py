@@ -23,11 +23,13 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .extras import require
 from .io import atomic_output, existing_file, first_line, read_cube, read_wavelengths
 
 SUFFIXES = {".hdr": "envi", ".img": "envi", ".tif": "tiff", ".tiff": "tiff", ".nc": "netcdf", ".png": "png",
             ".h5": "h5"}
 FORMATS = ("envi", "tiff", "netcdf", "png", "h5")
+EXTRA_USES = {"envi": "ENVI export", "netcdf": "NetCDF export"}   # formats whose writer needs the export extra
 
 
 def format_for(path, fmt: str | None = None) -> str:
@@ -47,7 +49,10 @@ def output_paths(path, fmt: str) -> list[Path]:
 
 def export(source, output, fmt: str, frame: int = 0) -> list[Path]:
     """Write ``source``'s cube (frame ``frame`` of a batch output) to ``output`` as ``fmt``; the paths written.
-    ``h5`` makes a self-contained copy of a batch output."""
+    ``h5`` makes a self-contained copy of a batch output. InputError, nothing read or written, when ``fmt``'s
+    writer needs an extra that is not installed (:mod:`clsdcam.extras`)."""
+    if fmt in EXTRA_USES:
+        require(EXTRA_USES[fmt])
     if fmt == "h5":
         return [copy_batch(source, output)]
     data = read_source(source, frame)

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .extras import require
+
 CUBE_KEYS = ("cube", "cubes")     # (K, H, W) and (N, K, H, W)
 COLORMAP = "magma"
 PERCENTILE = 99.9
@@ -60,12 +62,15 @@ def read_cubes(path) -> list[tuple]:
 
 
 def cube_layer(path: Path) -> tuple:
-    """The image layer of one cube file (see the module's docstring)."""
+    """The image layer of one cube file (see the module's docstring). napari brings dask; called without napari,
+    N frames need the video extra (InputError before the file is opened)."""
     import h5py
 
     from .io import read_dataset, read_wavelengths
 
     key = cube_key(path)
+    if key == "cubes":
+        require("reading a batch output's frames lazily")
     f = h5py.File(path, "r")
     wavelengths, attrs = read_wavelengths(f, f[key].shape[-3]), dict(f.attrs)
     if key == "cubes":

@@ -31,6 +31,7 @@ import uuid
 from dataclasses import replace
 from pathlib import Path
 
+from ..extras import require
 from ..io import check_output
 from ..provenance import provenance
 from .frames import FrameSource
@@ -50,8 +51,9 @@ def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None =
     ⌈missing / workers⌉, at most MAX_CHUNK. ``on_plan(n_frames, n_missing, layout)`` is called once
     the missing frames are known, ``progress(k)`` as k more frames are done. InputError before any
     work, nothing written, if ``output`` (or its parts folder) cannot be written or a frame to
-    compute cannot be read or is not finite.
+    compute cannot be read or is not finite, or the video extra is not installed (:mod:`clsdcam.extras`).
     """
+    require("batch")
     output, spec = check_output(Path(output).resolve()), _resolved(spec)
     source = FrameSource(spec.frames)
     n, parts = len(source), parts_dir(output)

@@ -27,6 +27,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from ..errors import InputError
+from ..extras import require
 from .scenes import (compose, disc_masks, envi_wavelengths, in_window, inner_shape, inner_window, read_samson,
                      resample_spectra, shared_data_dir)
 from .spectra import band_average, gaussian_line
@@ -76,7 +77,8 @@ def piecewise_kind(shape, wavelengths, rng) -> np.ndarray:
 
 def photo(box, rng: np.random.Generator) -> np.ndarray:
     """A random crop (the box's aspect, ≥ half the photograph's side), flip and zoom of a bundled photograph:
-    (h, w, 3) in [0, 1]."""
+    (h, w, 3) in [0, 1]. InputError when scikit-image (the video extra) is not installed."""
+    require("the natural scene kind")
     import skimage.data
 
     image = getattr(skimage.data, PHOTOS[rng.integers(len(PHOTOS))])()[..., :3].astype(np.float64) / 255.0
