@@ -35,8 +35,8 @@ def without(monkeypatch, *modules):
 
 
 def says_install(capsys, use: str, extra: str, module: str):
-    """The command's stderr is the one line naming ``use``, the extra, its install command and ``module``."""
-    assert capsys.readouterr().err == (f"clsdcam: error: {use} needs the {extra} extra: pip install "
+    """The command said nothing but the one line naming ``use``, the extra, its install command and ``module``."""
+    assert capsys.readouterr() == ("", f"clsdcam: error: {use} needs the {extra} extra: pip install "
                                        f"'clsdcam[{extra}]' (not installed: {module})\n")
 
 

@@ -44,9 +44,12 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
-    """Exit code: 0, 1 if some frame failed, 130 after a Ctrl-C that kept some frames (said on stderr)."""
+    """Exit code: 0, 1 if some frame failed, 130 after a Ctrl-C that kept some frames (said on stderr); 2 without
+    the video extra, before anything is said or done."""
     from ..batch import BatchInterrupted
+    from ..extras import require
 
+    require("batch")
     try:
         summary = _run_batch(args)
     except BatchInterrupted as stop:
