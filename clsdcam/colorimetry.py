@@ -34,7 +34,7 @@ SRGB_KNEE = 0.0031308                                    # the encoding's linear
 
 @lru_cache(maxsize=1)
 def colour_matching_functions() -> tuple[np.ndarray, np.ndarray]:
-    """(λ (471,) nm, [x̄ ȳ z̄] (471, 3)) of the CIE 1931 2° observer, read from the shipped table (read-only arrays)."""
+    """(λ (471,) nm, [x̄ ȳ z̄] (471, 3)) of the CIE 1931 2° observer, from the shipped table (read-only)."""
     text = resources.files(__package__).joinpath(CMF_FILE).read_text(encoding="ascii")
     rows = [line for line in text.splitlines() if line and not line.startswith("#")][1:]   # after the column names
     table = np.loadtxt(rows, delimiter=",", ndmin=2)
