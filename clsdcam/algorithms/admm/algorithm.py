@@ -28,8 +28,10 @@ from ..base import Algorithm, ratio
 if TYPE_CHECKING:                 # the parser lists the algorithms: the steps' SciPy is imported when one solves
     from .terms import Penalties, SplittingBase
 
-DATA, TV, NONNEG = 1e-2, 1e-2, 1e-2
-RELAXATION = 1.7     # every split's over-relaxation α (docs/convergence.md: how it was chosen)
+# the penalties and every split's over-relaxation α, chosen for the iterations to the model's answer
+# (docs/convergence.md, "A faster ADMM"); docs/admm.md has the first choice, made for the first 100 iterations
+DATA, TV, NONNEG = 1e-2, 3e-3, 1e-2
+RELAXATION = 1.7
 
 
 def penalties_for(split: "SplittingBase") -> "Penalties":
