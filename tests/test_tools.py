@@ -8,6 +8,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import bench_accuracy  # noqa: E402
+import bench_admm  # noqa: E402
 import bench_breakdown  # noqa: E402
 import bench_converged  # noqa: E402
 import bench_iteration  # noqa: E402
@@ -222,6 +223,43 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
     assert sorted((tmp_path / "cache").iterdir()) == cached
     assert [s["reference"] for s in again["scenes"]] == [s["reference"] for s in first["scenes"]]
     assert (tmp_path / "b" / "converged.png").stat().st_size > 0
+
+
+def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_path, capsys, monkeypatch):
+    """``--variants``: each variant runs with its constants (α = 1 and 1.7 give other curves), the settled mark is
+    the first from which every mark is within, a huge tolerance stops where the estimate first exists, and the
+    module's constants are as before afterwards."""
+    from clsdcam.algorithms.admm import algorithm
+
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
+    before = {name: getattr(algorithm, name) for name in bench_converged.ADMM_CONSTANTS.values()}
+    bench_converged.main(["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--reference-iters",
+                          "150", "--variants", "alpha=1;alpha=1.7,tv=0.003", "--variant-iters", "160",
+                          "--replay", "1e9", "--cache", str(tmp_path / "cache"), "--out", str(tmp_path)])
+    assert {name: getattr(algorithm, name) for name in before} == before
+    scene = json.loads((tmp_path / "variants.json").read_text())["scenes"][0]
+    plain, relaxed = scene["variants"]
+    assert plain["variant"] == {"alpha": 1.0} and relaxed["variant"] == {"alpha": 1.7, "tv": 0.003}
+    assert [stop["iteration"] for stop in (plain["stops"][0], relaxed["stops"][0])] == [bench_converged.AUTO_AT + 100] * 2
+    points = [{"iteration": 10, "psnr": 0.0, "angle": 0.0}, {"iteration": 20, "psnr": 9.0, "angle": 0.0},
+              {"iteration": 30, "psnr": 0.0, "angle": 0.0}, {"iteration": 40, "psnr": 9.0, "angle": 1.0}]
+    assert bench_converged.settled_within(points, {"psnr": 9.1, "angle": 0.6}) == 40
+    assert bench_converged.settled_within(points, {"psnr": 9.1, "angle": 0.0}) is None
+    assert "| 0 | piecewise, standard | alpha 1.7, tv 0.003 |" in capsys.readouterr().out
+
+
+def test_bench_admm_sweeps_the_relaxation_with_the_penalties(tmp_path, capsys):
+    """One row per combination, α among them; the module's constants are restored."""
+    from clsdcam.algorithms.admm import algorithm
+
+    before = algorithm.RELAXATION
+    bench_admm.main(["--size", "24x32", "--bands", "4", "--iters", "20", "--marks", "10", "--relaxation", "1,1.7",
+                     "--json", str(tmp_path / "a.json")])
+    runs = json.loads((tmp_path / "a.json").read_text())["runs"]
+    relaxed = [name for name in runs if name.startswith("admm")]
+    assert len(relaxed) == 2 and runs[relaxed[0]]["points"] != runs[relaxed[1]]["points"]
+    assert algorithm.RELAXATION == before
 
 
 def test_bench_panel_replays_one_scene_and_judges_a_speed_option(tmp_path, capsys, monkeypatch):

@@ -19,7 +19,7 @@ import sys
 import time
 
 from bench_accuracy import scene_points, size_text, solve
-from clsdcam.algorithms import admm
+from clsdcam.algorithms.admm import algorithm as admm
 from clsdcam.cli.options import size
 from clsdcam.sim import band_wavelengths, simulate
 from clsdcam.sim.kinds import make_kind
@@ -57,6 +57,7 @@ def main(argv=None) -> int:
     parser.add_argument("--data", type=values, default=[admm.DATA])
     parser.add_argument("--tv", type=values, default=[admm.TV])
     parser.add_argument("--nonneg", type=values, default=[admm.NONNEG])
+    parser.add_argument("--relaxation", type=values, default=[admm.RELAXATION], help="over-relaxation α values")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
     marks = sorted({int(m) for m in args.marks.split(",") if int(m) <= args.iters} | {args.iters})
@@ -65,15 +66,15 @@ def main(argv=None) -> int:
     print("| run | " + " | ".join(f"{m}" for m in marks) + " | s |\n|---|" + "---|" * (len(marks) + 1))
     results = {"fista --no-skip": run(sim, {"skip": False}, marks)}
     print(row("fista --no-skip", results["fista --no-skip"]), flush=True)
-    saved = (admm.DATA, admm.TV, admm.NONNEG)
+    saved = (admm.DATA, admm.TV, admm.NONNEG, admm.RELAXATION)
     try:
-        for data, tv, nonneg in itertools.product(args.data, args.tv, args.nonneg):
-            admm.DATA, admm.TV, admm.NONNEG = data, tv, nonneg
-            name = f"admm DATA={data:g} TV={tv:g} NONNEG={nonneg:g}"
+        for data, tv, nonneg, alpha in itertools.product(args.data, args.tv, args.nonneg, args.relaxation):
+            admm.DATA, admm.TV, admm.NONNEG, admm.RELAXATION = data, tv, nonneg, alpha
+            name = f"admm DATA={data:g} TV={tv:g} NONNEG={nonneg:g} α={alpha:g}"
             results[name] = run(sim, {"algorithm": "admm"}, marks)
             print(row(name, results[name]), flush=True)
     finally:
-        admm.DATA, admm.TV, admm.NONNEG = saved
+        admm.DATA, admm.TV, admm.NONNEG, admm.RELAXATION = saved
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"kind": args.kind, "seed": args.seed, "marks": marks, "runs": results}, f, indent=1)

@@ -26,12 +26,18 @@ snapshots) over the default's, the speed-up. Writes ``converged.json`` (after ev
 points, the reference's band). ``--seed`` replays a panel, ``--only I,J`` some scenes of it; ``--weight-from
 today`` takes the weight from today's run instead, and ``--replay`` replays the stop at other tolerances on the
 cached reference runs.
+
+``--variants 'alpha=1.7,tv=0.003;alpha=1'`` measures ADMM's constants instead (``clsdcam.algorithms.admm``'s DATA,
+TV, NONNEG and RELAXATION, by the names data, tv, nonneg and alpha): each variant runs ``--variant-iters`` at the
+scene's weight, scored every 10 iterations, and the table gives the mark from which it stays within the rules and
+where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``variants.json``).
 """
 from __future__ import annotations
 
 import hashlib
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -126,6 +132,72 @@ def replay_stop(run: dict, tolerance: float) -> dict | None:
             return {"iteration": i, **{m: float(np.interp(i, marks, [p[m] for p in run["points"]]))
                                        for m in ("psnr", "angle")}}
     return None
+
+
+def settled_within(points: list[dict], ref: dict) -> int | None:
+    """The first scored mark from which every mark is within the answer's tolerance of ``ref``, or None."""
+    inside = [p["psnr"] >= ref["psnr"] - PSNR_DB and p["angle"] <= ref["angle"] + ANGLE_DEG for p in points]
+    return next((int(points[i]["iteration"]) for i in range(len(points)) if all(inside[i:])), None)
+
+
+ADMM_CONSTANTS = {"data": "DATA", "tv": "TV", "nonneg": "NONNEG", "alpha": "RELAXATION"}
+
+
+def parse_variants(text: str) -> list[dict]:
+    """'alpha=1.7,tv=0.003;alpha=1' → [{'alpha': 1.7, 'tv': 0.003}, {'alpha': 1.0}] (names: ADMM_CONSTANTS)."""
+    variants = []
+    for part in filter(None, text.split(";")):
+        pairs = [item.split("=") for item in part.split(",")]
+        if any(len(p) != 2 or p[0] not in ADMM_CONSTANTS for p in pairs):
+            raise ValueError(f"--variants {part!r}: NAME=VALUE pairs, names {', '.join(ADMM_CONSTANTS)}")
+        variants.append({name: float(value) for name, value in pairs})
+    return variants
+
+
+@contextmanager
+def admm_constants(variant: dict):
+    """ADMM's module constants set to ``variant`` (restored after)."""
+    from clsdcam.algorithms.admm import algorithm
+
+    saved = {name: getattr(algorithm, name) for name in ADMM_CONSTANTS.values()}
+    try:
+        for key, value in variant.items():
+            setattr(algorithm, ADMM_CONSTANTS[key], value)
+        yield
+    finally:
+        for name, value in saved.items():
+            setattr(algorithm, name, value)
+
+
+def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
+    """One scene's ADMM variants at its weight (today's or the default's ``--tv auto`` choice) against its reference."""
+    sim = panel_scene(plan, shape, bands)
+    weight_run, _ = timed_solve(sim, TODAY if args.weight_from == "today" else {})
+    tau = float(weight_run.attrs["tv_chosen"])
+    ref = reference({a: reference_run(sim, plan, tau, a, args.reference_iters, cache) for a in REFERENCE_ALGORITHMS})
+    rows = []
+    for variant in parse_variants(args.variants):
+        with admm_constants(variant):
+            result, seconds = timed_solve(sim, {"tv": tau, "iters": args.variant_iters, "algorithm": "admm"},
+                                          range(10, args.variant_iters + 1, 10))
+        run = {"points": curve(sim, result), "change": [r["change"] for r in result.history]}
+        rows.append({"variant": variant, "within": settled_within(run["points"], ref),
+                     "stops": [replay_stop(run, t) for t in args.tolerances],
+                     "ms_per_iteration": 1e3 * seconds / args.variant_iters})
+    return {**plan, "tv": tau, "reference": ref, "variants": rows}
+
+
+def variant_rows(results: dict) -> list[str]:
+    tolerances = results["replay"]
+    rows = ["| # | kind | variant | stays within from | " + " | ".join(f"stop at {t:g}" for t in tolerances) + " |",
+            "|---:|---|---|---|" + "---|" * len(tolerances)]
+    for s in results["scenes"]:
+        for v in s["variants"]:
+            name = ", ".join(f"{k} {x:g}" for k, x in v["variant"].items()) or "as built"
+            cells = [stop_cell(stop, s["reference"]) for stop in v["stops"]]
+            rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {name} | {v['within'] or '–'} | "
+                        + " | ".join(cells) + " |")
+    return rows
 
 
 def margins(scene: dict) -> dict:
@@ -250,8 +322,15 @@ def main(argv=None) -> int:
                         help="whose --tv auto choice is the scene's weight (default: the default's)")
     parser.add_argument("--replay", default="0.1,0.05,0.03",
                         help="tolerances at which to replay the stop on the reference runs (the table's last part)")
+    parser.add_argument("--variants", default="", metavar="NAME=V[,…][;…]",
+                        help="measure ADMM's constants instead (names: data, tv, nonneg, alpha; the docstring)")
+    parser.add_argument("--variant-iters", type=int, default=500, help="each variant's iterations (default 500)")
     add_backend_option(parser)
     args = parser.parse_args(argv)
+    try:
+        parse_variants(args.variants)
+    except ValueError as error:
+        parser.error(str(error))
     Where.use(args.backend)
     only = {int(i) for i in args.only.split(",") if i}
     if not all(0 <= i < args.scenes for i in only):
@@ -263,15 +342,21 @@ def main(argv=None) -> int:
     results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "backend": args.backend,
                "reference_iters": args.reference_iters, "weight_from": args.weight_from,
                "replay": [float(t) for t in args.replay.split(",") if t], "scenes": []}
+    args.tolerances = results["replay"]
+    name = "variants" if args.variants else "converged"
     print(f"panel seed {seed}", file=sys.stderr, flush=True)
     for i, plan in enumerate(scene_plan(args.scenes, seed, panel_kinds())):
         if only and i not in only:
             continue
-        results["scenes"].append({"index": i, **run_scene(plan, args.size, args.bands, args.reference_iters,
-                                                          cache, args.weight_from)})
+        scene = (variant_runs(plan, args.size, args.bands, args, cache) if args.variants else
+                 run_scene(plan, args.size, args.bands, args.reference_iters, cache, args.weight_from))
+        results["scenes"].append({"index": i, **scene})
         print(f"  scene {i + 1}/{args.scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
-        save_json(out, "converged", results)
-    report(out, "converged", results, markdown(results))
+        save_json(out, name, results)
+    if args.variants:
+        report(out, name, results, "\n".join(variant_rows(results)))
+        return 0
+    report(out, name, results, markdown(results))
     plot(results, out / "converged.png")
     return 0
 
