@@ -2,7 +2,7 @@
 
 Parts. Chunk [s, e) is written into a temporary file renamed to
 ``OUT.h5.parts/chunk-SSSSSS-EEEEEE.h5``: a part is whole or absent. It holds ``cubes``
-(e − s, K, H, W) (NaN where a frame failed), ``wavelengths`` and per-frame ``index``,
+(e − s, K, H, W) (NaN where a frame failed), ``wavelength`` and per-frame ``index``,
 ``iterations``, ``stop_reason``, ``seconds``, ``error``, ``warm`` (started from the previous frame's state).
 
 Resume. A frame is done when some part covers it; a re-run computes only the others (any
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io import atomic_output, check_output
+from ..io import atomic_output, attach_scales, check_output, read_wavelengths, write_wavelengths
 from .spec import BatchSpec, BatchSummary
 
 MAX_CHUNK = 64          # default chunk cap: bounds the work a crash loses and keeps tasks balanced
@@ -127,7 +127,7 @@ def write_cube(out, j: int, n: int, cube: np.ndarray, wavelengths):
     """Cube j of the part's n (``cubes`` is created, NaN-filled, with the first one)."""
     if "cubes" not in out:
         out.create_dataset("cubes", (n,) + cube.shape, np.float32, chunks=(1,) + cube.shape, fillvalue=np.nan)
-        out["wavelengths"] = wavelengths
+        write_wavelengths(out, wavelengths)
     out["cubes"][j] = cube
 
 
@@ -164,23 +164,11 @@ def assemble(output: Path, n: int, lost: dict[int, str], attrs: dict) -> BatchSu
     with atomic_output(output) as tmp, h5py.File(tmp, "w") as f:
         cubes = f.create_virtual_dataset("cubes", layout, fillvalue=np.nan)
         write_columns(f, per_frame)
-        _attach_scales(f, cubes, wavelengths, per_frame)
+        attach_scales(f, cubes, wavelengths)
+        for key in per_frame:
+            f[key].dims[0].attach_scale(f["frame"])
         f.attrs.update({**attrs, **json.loads((parts_dir(output) / "batch.json").read_text())})
     return BatchSummary(n_frames=n, computed_frames=0, failed=failed)
-
-
-def _attach_scales(f, cubes, wavelengths, columns):
-    """``cubes``' dimension scales: ``frame`` (also on the per-frame ``columns``), ``wavelength`` (nm), ``y``, ``x``."""
-    n, _, h, w = cubes.shape
-    axes = {"frame": np.arange(n), "wavelength": np.asarray(wavelengths, np.float64), "y": np.arange(h),
-            "x": np.arange(w)}
-    for axis, (label, values) in enumerate(axes.items()):
-        f[label] = values
-        f[label].make_scale(label)
-        cubes.dims[axis].attach_scale(f[label])
-    f["wavelength"].attrs.update(units="nm", long_name="band centre wavelength")
-    for key in columns:
-        f[key].dims[0].attach_scale(f["frame"])
 
 
 def _gather(parts: Path, n: int):
@@ -197,7 +185,8 @@ def _gather(parts: Path, n: int):
         with h5py.File(path, "r") as part:
             if "cubes" not in part:
                 continue
-            shape, wavelengths = part["cubes"].shape, part["wavelengths"][...]
+            shape = part["cubes"].shape
+            wavelengths = read_wavelengths(part, shape[1])
             layout = layout or h5py.VirtualLayout(shape=(n,) + shape[1:], dtype=np.float32)
             layout[s:e] = h5py.VirtualSource(f"{path.parent.name}/{path.name}", "cubes", shape=shape)
     return per_frame, layout, wavelengths
