@@ -24,6 +24,7 @@ from clsdcam.camera.calibration import Calibration, PixelMask, Preprocessing, pr
 from clsdcam.cli import main
 from clsdcam.errors import InputError
 from clsdcam.algorithms.fista import Fista
+from clsdcam.metrics import peak_ratio, psnr, spectral_angle
 from clsdcam.provenance import provenance, sha256
 from clsdcam.sim.video import simulate_video, write_video
 from clsdcam.solve.solver import Settings, Solver, reconstruct
@@ -230,6 +231,27 @@ def test_the_output_has_provenance_and_dimension_scales(video, tmp_path):
                           Preprocessing())
     assert {k: attrs[k] for k in expected if k != "created"} == {k: v for k, v in expected.items() if k != "created"}
     assert attrs["frames_sha256"] == sha256(video["frames"]) and attrs["warm_start"] and "settings" in attrs
+
+
+def test_a_truth_gives_each_frames_accuracy_in_the_summary_and_the_output(video, tmp_path, capsys):
+    """Issue 48: ``batch --truth`` prints and stores each frame's PSNR, mean spectral angle and peak ratio: those of
+    the written cube against its true cube."""
+    output = tmp_path / "out.h5"
+    assert main(command(video, output, "--iters", "5", "--truth", str(video["truth"]))) == 0
+    printed = capsys.readouterr().out
+    written, iterations, _ = cubes(output)
+    with h5py.File(video["truth"], "r") as f:
+        truth = f["cubes"][...]
+    with h5py.File(output, "r") as f:
+        attrs, warm = dict(f.attrs), f["warm"][...]
+    assert attrs["truth_path"] == str(video["truth"].resolve()) and attrs["truth_sha256"] == sha256(video["truth"])
+    lines = printed.split(f"against {video['truth']}:\n")[1].splitlines()
+    assert len(lines) == N_FRAMES and warm.sum() == N_FRAMES - 1
+    for i, line in enumerate(lines):
+        direct = psnr(written[i], truth[i]), spectral_angle(written[i], truth[i]), peak_ratio(written[i], truth[i])
+        assert (attrs["psnr"][i], attrs["spectral_angle"][i], attrs["peak_ratio"][i]) == direct
+        assert line == (f"  frame {i}: {'warm' if warm[i] else 'cold'}, {iterations[i]} iterations: PSNR "
+                        f"{direct[0]:.2f} dB, mean spectral angle {direct[1]:.2f}°, peak ratio {direct[2]:.3f}")
 
 
 def test_batch_help_shows_defaults_and_ends_with_examples(capsys):

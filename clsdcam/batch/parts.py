@@ -17,7 +17,8 @@ Output. ``OUT.h5`` holds ``cubes`` (N,K,H,W), an HDF5 virtual dataset over the p
 where a frame failed), with dimension scales ``frame``, ``wavelength`` (nm), ``y``, ``x`` as
 single cubes have them (xarray's h5netcdf engine reads them as dims and coordinates), per-frame
 ``iterations``, ``stop_reason``, ``seconds``, ``error``, ``warm`` (on the ``frame`` scale), and as
-attributes the provenance (:mod:`clsdcam.provenance`) and the batch's settings; it is
+attributes the provenance (:mod:`clsdcam.provenance`), the batch's settings and, against a truth
+(:mod:`clsdcam.batch.truth`), the per-frame ``psnr``, ``spectral_angle`` and ``peak_ratio``; it is
 rebuilt, atomically, at the end of every run.
 """
 from __future__ import annotations
@@ -150,9 +151,10 @@ def read_records(part: Path) -> list[dict]:
 
 
 # ---- the output -------------------------------------------------------------------------------
-def assemble(output: Path, n: int, lost: dict[int, str], attrs: dict) -> BatchSummary:
+def assemble(output: Path, n: int, lost: dict[int, str], attrs: dict, score=None) -> BatchSummary:
     """OUT.h5: a virtual ``cubes`` over the parts (NaN where a frame failed or is ``lost``) with its dimension
-    scales, per-frame records, and ``attrs`` (the provenance) beside the batch's settings."""
+    scales, per-frame records, and ``attrs`` (the provenance) beside the batch's settings; with ``score``
+    (``cubes`` → {name: per-frame figures}, :meth:`clsdcam.batch.truth.TruthVideo.score`) its figures too."""
     import h5py
 
     per_frame, layout, wavelengths = _gather(parts_dir(output), n)
@@ -168,7 +170,9 @@ def assemble(output: Path, n: int, lost: dict[int, str], attrs: dict) -> BatchSu
         for key in per_frame:
             f[key].dims[0].attach_scale(f["frame"])
         f.attrs.update({**attrs, **json.loads((parts_dir(output) / "batch.json").read_text())})
-    return BatchSummary(n_frames=n, computed_frames=0, failed=failed)
+        accuracy = score(cubes) if score is not None else {}
+        f.attrs.update(accuracy)
+    return BatchSummary(n_frames=n, computed_frames=0, failed=failed, per_frame=per_frame, accuracy=accuracy)
 
 
 def _gather(parts: Path, n: int):
