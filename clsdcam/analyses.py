@@ -141,8 +141,8 @@ def twopoint_rows(result: dict) -> list[tuple[str, str, str]]:
 
 
 def design_rows(result: dict) -> list[tuple[str, str, str]]:
-    return [(f"target reconstruction, {name}", f"{r['psnr']:.2f} dB PSNR, {r['angle']:.1f}° mean spectral angle", "—")
-            for name, r in result["designs"].items()]
+    return [(f"target reconstruction, {name}", f"{r['psnr']:.2f} dB PSNR, {r['angle']:.1f}° mean spectral angle",
+             "—") for name, r in result["designs"].items()]
 
 
 ROWS = {"resolution": resolution_rows, "condition": condition_rows, "spectral": spectral_rows,

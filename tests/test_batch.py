@@ -250,8 +250,9 @@ def test_a_truth_gives_each_frames_accuracy_in_the_summary_and_the_output(video,
     for i, line in enumerate(lines):
         direct = psnr(written[i], truth[i]), spectral_angle(written[i], truth[i]), peak_ratio(written[i], truth[i])
         assert (attrs["psnr"][i], attrs["spectral_angle"][i], attrs["peak_ratio"][i]) == direct
-        assert line == (f"  frame {i}: {'warm' if warm[i] else 'cold'}, {iterations[i]} iterations: PSNR "
-                        f"{direct[0]:.2f} dB, mean spectral angle {direct[1]:.2f}°, peak ratio {direct[2]:.3f}")
+        assert line == (f"  frame {i}: {'warm' if warm[i] else 'cold'}, {iterations[i]} iteration"
+                        f"{'s' * (int(iterations[i]) != 1)}: PSNR {direct[0]:.2f} dB, "
+                        f"mean spectral angle {direct[1]:.2f}°, peak ratio {direct[2]:.3f}")
 
 
 def test_batch_help_shows_defaults_and_ends_with_examples(capsys):
@@ -325,7 +326,7 @@ def test_external_scheduler_and_worker(video, tmp_path):
 
 def test_a_frame_damaged_during_the_run_is_recorded_and_the_rest_go_on(video, tmp_path, capsys, monkeypatch):
     """Every frame is checked before the run (tests/test_batch_checks.py); frames 3 and 6, damaged after that
-    check, fail with their reasons and the others go on."""
+    check, fail with their reasons and the others go on; against the truth they have no figures."""
     folder = tmp_path / "frames"
     folder.mkdir()
     frames = np.load(video["frames"])
@@ -341,12 +342,16 @@ def test_a_frame_damaged_during_the_run_is_recorded_and_the_rest_go_on(video, tm
 
     monkeypatch.setattr(stream, "_read", damaged_on_the_way)
     code = main(["batch", str(folder), "--calibration", str(video["calibration"]), "-o", str(tmp_path / "out.h5"),
-                 "--workers", "0", "--iters", "10", "--quiet"])
+                 "--workers", "0", "--iters", "10", "--quiet", "--truth", str(video["truth"])])
     assert code == 1
     got, _, errors = cubes(tmp_path / "out.h5")
     assert "non-finite" in errors[3] and "f06.npy" in errors[6] and np.isnan(got[[3, 6]]).all()
     assert np.isfinite(np.delete(got, [3, 6], axis=0)).all()
-    assert "frame 3" in capsys.readouterr().err
+    printed = capsys.readouterr()
+    assert "frame 3" in printed.err and "  frame 3: failed\n" in printed.out and "  frame 6: failed\n" in printed.out
+    with h5py.File(tmp_path / "out.h5", "r") as f:
+        psnrs = f.attrs["psnr"]
+    assert np.isnan(psnrs[[3, 6]]).all() and np.isfinite(np.delete(psnrs, [3, 6])).all()
 
 
 def test_simulate_frames_writes_a_video(tmp_path):

@@ -105,7 +105,8 @@ def false_truth(video, path, change):
 
 @pytest.mark.parametrize("change, message", [
     ("frames", "5 true cubes for 6 frames"), ("bands", "3 bands where the calibration gives 2"),
-    ("pixels", "true cubes of 16×18 pixels for reconstructions of 16×20"), ("wavelengths", "its wavelengths 534–790 nm are not the calibration's (514–770 nm)")])
+    ("pixels", "true cubes of 16×18 pixels for reconstructions of 16×20"),
+    ("wavelengths", "its wavelengths 534–790 nm are not the calibration's (514–770 nm)")])
 def test_a_truth_that_does_not_match_the_frames_is_refused_before_any_work(video, tmp_path, monkeypatch, capsys,
                                                                            change, message):
     """``batch --truth``: one line naming the truth and what differs, exit 2, nothing written."""

@@ -73,10 +73,10 @@ def accuracy_lines(summary) -> list[str]:
 
     records, lines = summary.per_frame, []
     for i in range(summary.n_frames):
-        start = "warm" if records["warm"][i] else "cold"
+        start, iterations = "warm" if records["warm"][i] else "cold", int(records["iterations"][i])
         figures = {name: values[i] for name, values in summary.accuracy.items()}
-        lines.append(f"  frame {i}: " + ("failed" if records["error"][i] else
-                                         f"{start}, {records['iterations'][i]} iterations: {accuracy_text(figures)}"))
+        lines.append(f"  frame {i}: " + ("failed" if records["error"][i] else f"{start}, {iterations} iteration"
+                                         f"{'s' * (iterations != 1)}: {accuracy_text(figures)}"))
     return lines
 
 
