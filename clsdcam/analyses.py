@@ -41,12 +41,6 @@ def run_resolution(args, out: Path) -> dict:
     return {"level": 0.7, "superpixel_px": sim.SUPERPIXEL_PX, "psfs": result}
 
 
-def skipped_lines(name: str, result: dict) -> list[str]:
-    """One printed line per part of an analysis that was skipped, with why (the measured PSFs not found)."""
-    return [f"{name}: {label} skipped: {part['skipped']}" for label, part in result.get("psfs", {}).items()
-            if "skipped" in part]
-
-
 def psf_resolution(psf: np.ndarray, picture: Path, binning: int) -> dict:
     """r₇₀ of one PSF, its picture, and how the PSF was prepared."""
     record = analysis.autocorrelation_resolution(psf)
@@ -97,14 +91,15 @@ RUNNERS = {"resolution": run_resolution, "condition": run_condition, "designs": 
 ANALYSES = tuple(RUNNERS)
 
 
-# ---- summary -----------------------------------------------------------------------------------
+# ---- key figures: (quantity, clsdcam's value, the paper's) per analysis ------------------------------
 def superpixel_text(px) -> str:
     return f"{px / sim.SUPERPIXEL_PX:.2f} super-pixel ({px} px)"
 
 
 def resolution_rows(result: dict) -> list[tuple[str, str, str]]:
+    """One row per PSF: r₇₀ in pixels and super-pixels, or why it was skipped (a measured PSF not found)."""
     rows = []
-    for label, r in result.items():
+    for label, r in result["psfs"].items():
         if "skipped" in r:
             rows.append((f"autocorrelation resolution, {label}", f"skipped: {r['skipped']}", "—"))
             continue
@@ -130,21 +125,39 @@ def condition_rows(result: dict) -> list[tuple[str, str, str]]:
     return rows
 
 
+def spectral_rows(result: dict) -> list[tuple[str, str, str]]:
+    return [("peak-wavelength error, median / worst", f"{result['median_abs_error_nm']:.1f} / "
+             f"{result['worst_abs_error_nm']:.1f} nm ({len(result['true_nm'])} sources)", "within 5 nm")]
+
+
+def twopoint_rows(result: dict) -> list[tuple[str, str, str]]:
+    """One row per wavelength: the smallest separation resolved (and every larger one)."""
+    rows = []
+    for line in analysis.TWO_POINT_WAVELENGTHS:
+        d = result[f"{line:g}"]["resolved_px"]
+        rows.append((f"two-point resolution at {line:g} nm (Rayleigh)",
+                     f"not within {result['separations_px'][-1]} px" if d is None else f"{d} px", "—"))
+    return rows
+
+
+def design_rows(result: dict) -> list[tuple[str, str, str]]:
+    return [(f"target reconstruction, {name}", f"{r['psnr']:.2f} dB PSNR, {r['angle']:.1f}° mean spectral angle",
+             "—") for name, r in result["designs"].items()]
+
+
+ROWS = {"resolution": resolution_rows, "condition": condition_rows, "spectral": spectral_rows,
+        "twopoint": twopoint_rows, "designs": design_rows}     # in the summary table's order
+
+
+def figure_lines(name: str, result: dict) -> list[str]:
+    """The analysis' key figures as printed lines: ``  quantity: value`` and the paper's value when it gives one."""
+    return [f"  {quantity}: {value}" + (f" (paper: {paper})" if paper != "—" else "")
+            for quantity, value, paper in ROWS[name](result)]
+
+
 def summary_table(results: dict) -> str:
     """Markdown: each figure next to the paper's."""
-    rows = resolution_rows(results["resolution"]["psfs"]) + condition_rows(results["condition"])
-    spectral = results["spectral"]
-    rows.append(("peak-wavelength error, median / worst",
-                 f"{spectral['median_abs_error_nm']:.1f} / {spectral['worst_abs_error_nm']:.1f} nm "
-                 f"({len(spectral['true_nm'])} sources)", "within 5 nm"))
-    twopoint = results["twopoint"]
-    for line in analysis.TWO_POINT_WAVELENGTHS:
-        d = twopoint[f"{line:g}"]["resolved_px"]
-        rows.append((f"two-point resolution at {line:g} nm (Rayleigh)",
-                     f"not within {twopoint['separations_px'][-1]} px" if d is None else f"{d} px", "—"))
-    for name, r in results["designs"]["designs"].items():
-        rows.append((f"target reconstruction, {name}", f"{r['psnr']:.2f} dB PSNR, {r['angle']:.1f}° mean spectral angle",
-                     "—"))
+    rows = [row for name, rows_of in ROWS.items() for row in rows_of(results[name])]
     return "\n".join(["| quantity | clsdcam | paper |", "|---|---|---|"] + [f"| {a} | {b} | {c} |" for a, b, c in rows])
 
 

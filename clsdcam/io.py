@@ -17,6 +17,8 @@ from .errors import InputError
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff")
 MAX_DATASET_BYTES = 8 << 30   # refuse to read more than 8 GiB from one dataset (a corrupt or hostile header)
+WAVELENGTH = "wavelength"       # the bands' wavelengths (nm) in every file clsdcam writes: the netCDF dimension name
+OLD_WAVELENGTH = "wavelengths"  # their name in calibrations, truths and batch parts written before; still read
 
 
 # ---- atomic writes ----------------------------------------------------------------------
@@ -246,15 +248,18 @@ def write_cube(path, cube, wavelengths, history=(), attrs=None, full_field=None)
 
 
 def write_scaled(f, name: str, data: np.ndarray, wavelengths):
-    """Dataset ``name`` (…, K, H, W) with dimension scales on its last three axes: ``wavelength`` (nm), ``y``,
-    ``x``; leading axes (frames) get a ``frame`` scale."""
-    cube = f.create_dataset(name, data=data)
-    f["wavelength"] = np.asarray(wavelengths, np.float64)
-    f["wavelength"].attrs.update(units="nm", long_name="band centre wavelength")
-    axes = ["frame"] * (data.ndim - 3) + ["wavelength", "y", "x"]
+    """Dataset ``name`` (…, K, H, W) with :func:`attach_scales`."""
+    return attach_scales(f, f.create_dataset(name, data=data), wavelengths)
+
+
+def attach_scales(f, cube, wavelengths):
+    """``cube`` (…, K, H, W) with dimension scales on its last three axes: ``wavelength`` (nm), ``y``, ``x``
+    (pixel indices); leading axes (frames) get a ``frame`` scale (frame indices)."""
+    write_wavelengths(f, wavelengths)
+    axes = ["frame"] * (cube.ndim - 3) + [WAVELENGTH, "y", "x"]
     for axis, label in enumerate(axes):
         if label not in f:
-            f[label] = np.arange(data.shape[axis], dtype=np.int64)
+            f[label] = np.arange(cube.shape[axis], dtype=np.int64)
         f[label].make_scale(label)
         cube.dims[axis].attach_scale(f[label])
     return cube
@@ -269,13 +274,24 @@ def _attribute(value):
     return value
 
 
+def write_wavelengths(f, wavelengths):
+    """Dataset WAVELENGTH (K,) float64, nm, with its units: every file clsdcam writes names its bands' wavelengths
+    so (a cube's dimension scale, a calibration's, a truth's, a batch part's)."""
+    f[WAVELENGTH] = np.asarray(wavelengths, np.float64)
+    f[WAVELENGTH].attrs.update(units="nm", long_name="band centre wavelength")
+    return f[WAVELENGTH]
+
+
+def wavelength_key(f) -> str | None:
+    """The name of an open file's wavelength dataset: WAVELENGTH, else OLD_WAVELENGTH (files written before the
+    one name), else None."""
+    return next((key for key in (WAVELENGTH, OLD_WAVELENGTH) if key in f), None)
+
+
 def read_wavelengths(f, n_bands: int) -> np.ndarray:
-    """A file's band wavelengths: ``wavelength`` (cubes written since 0.2), ``wavelengths`` (calibrations, truth
-    files, earlier cubes), else 0 … K−1."""
-    for key in ("wavelength", "wavelengths"):
-        if key in f:
-            return f[key][...]
-    return np.arange(n_bands, dtype=float)
+    """A file's band wavelengths (:func:`wavelength_key`), else 0 … K−1."""
+    key = wavelength_key(f)
+    return f[key][...] if key else np.arange(n_bands, dtype=float)
 
 
 def read_cube(path) -> dict:

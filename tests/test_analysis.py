@@ -2,6 +2,7 @@
 direct correlation sums, analytic profiles), the lens comparators, and ``analyze`` through a parser."""
 import argparse
 import json
+import re
 
 import numpy as np
 import pytest
@@ -191,8 +192,44 @@ def parser():
     return top
 
 
+def printed_figures(text: str, name: str) -> dict[str, str]:
+    """The key figures ``analyze`` printed under analysis ``name`` (its lines ``  quantity: value``), by quantity."""
+    block = re.search(rf"^{name}: .*\n((?:  .*\n)*)", text, re.M)[1]
+    return dict(line[2:].split(": ", 1) for line in block.splitlines())
+
+
+def numbers(text: str) -> list[float]:
+    return [float(x) for x in re.findall(r"-?\d+(?:\.\d+)?", text)]
+
+
+def check_printed_figures(text: str, out):
+    """Each analysis' printed figures are its JSON's, as rounded when printed."""
+    res, cond, spec, two, des = (json.loads((out / f"{n}.json").read_text())
+                                 for n in ("resolution", "condition", "spectral", "twopoint", "designs"))
+    caustic = res["psfs"]["simulated caustic"]
+    assert numbers(printed_figures(text, "resolution")["autocorrelation resolution, simulated caustic"])[:2] == \
+        [round(caustic["pixels"], 2), round(caustic["superpixels"], 2)]
+    figures = printed_figures(text, "condition")
+    assert len(figures) == 6
+    for design in ("diffuser", "low-NA lens", "high-NA lens"):
+        for mode in ("2-D", "3-D"):
+            listed = re.search(r"\[px: (.*)\]", figures[f"separation at κ = 40, {design}, {mode}, 16 points"])[1]
+            at = {n: cond["groups"][f"{design}|{mode}|{n}"]["separation_at_limit_px"] for n in cond["group_sizes"]}
+            assert listed == ", ".join(f"n={n}: {'never' if d is None else d}" for n, d in at.items())
+    median_worst = numbers(printed_figures(text, "spectral")["peak-wavelength error, median / worst"])[:3]
+    assert median_worst == [round(spec["median_abs_error_nm"], 1), round(spec["worst_abs_error_nm"], 1),
+                            len(spec["true_nm"])]
+    for line, value in zip(analysis.TWO_POINT_WAVELENGTHS, printed_figures(text, "twopoint").values()):
+        d = two[f"{line:g}"]["resolved_px"]
+        assert value == (f"not within {two['separations_px'][-1]} px" if d is None else f"{d} px")
+    for name, value in printed_figures(text, "designs").items():
+        r = des["designs"][name.removeprefix("target reconstruction, ")]
+        assert numbers(value) == [round(r["psnr"], 2), round(r["angle"], 1)]
+
+
 def test_analyze_all_through_a_parser(tmp_path, capsys, monkeypatch):
-    """Everything on tiny sizes; the measured PSFs are made absent, so they are skipped cleanly."""
+    """Everything on tiny sizes; the measured PSFs are made absent, so they are skipped cleanly. Each analysis
+    prints its key figures, the JSON's."""
     monkeypatch.setenv("CLSDCAM_DATA", str(tmp_path / "no-data"))
     out = tmp_path / "an"
     args = parser().parse_args(["analyze", "all", str(out), "--size", "32x40", "--recon-size", "24x32",
@@ -201,6 +238,7 @@ def test_analyze_all_through_a_parser(tmp_path, capsys, monkeypatch):
     table = capsys.readouterr().out
     assert "| autocorrelation resolution, simulated caustic |" in table and "within 5 nm" in table
     assert "skipped: psf/spectraldiffuserscope_psf.npy not present" in table
+    check_printed_figures(table, out)
     assert cli_analyze.ANALYSES == analyses.ANALYSES
     for name in cli_analyze.ANALYSES:
         assert (out / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
@@ -211,11 +249,20 @@ def test_analyze_all_through_a_parser(tmp_path, capsys, monkeypatch):
     assert not [p for p in out.iterdir() if p.name.startswith(".")]
 
 
-def test_each_analysis_is_a_sub_choice_with_its_own_options(tmp_path):
+def test_each_analysis_is_a_sub_choice_with_its_own_options(tmp_path, capsys):
     args = parser().parse_args(["analyze", "resolution", str(tmp_path), "--size", "40x48"])
     assert (args.what, args.size) == ("resolution", (40, 48)) and not hasattr(args, "recon_size")
     assert cli_analyze.run(args) == 0
     result = json.loads((tmp_path / "resolution.json").read_text())["psfs"]
+    printed = printed_figures(capsys.readouterr().out, "resolution")
+    assert list(printed) == [f"autocorrelation resolution, {label}" + (f", binned {r['binning']}×" if
+                                                                      r.get("binning", 1) > 1 else "")
+                             for label, r in result.items()]
+    for r, value in zip(result.values(), printed.values()):
+        if "skipped" in r:
+            assert value == f"skipped: {r['skipped']}"
+        else:
+            assert numbers(value)[:2] == [round(r["pixels"], 2), round(r["superpixels"], 2)]
     assert 2.0 <= result["simulated caustic"]["pixels"] <= 4.5
     tutorial = result["DiffuserCam tutorial (measured)"]
     if "skipped" not in tutorial:  # the real 1200×1600 frame, binned 4× to 300×400

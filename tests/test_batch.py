@@ -24,6 +24,7 @@ from clsdcam.camera.calibration import Calibration, PixelMask, Preprocessing, pr
 from clsdcam.cli import main
 from clsdcam.errors import InputError
 from clsdcam.algorithms.fista import Fista
+from clsdcam.metrics import peak_ratio, psnr, spectral_angle
 from clsdcam.provenance import provenance, sha256
 from clsdcam.sim.video import simulate_video, write_video
 from clsdcam.solve.solver import Settings, Solver, reconstruct
@@ -232,6 +233,28 @@ def test_the_output_has_provenance_and_dimension_scales(video, tmp_path):
     assert attrs["frames_sha256"] == sha256(video["frames"]) and attrs["warm_start"] and "settings" in attrs
 
 
+def test_a_truth_gives_each_frames_accuracy_in_the_summary_and_the_output(video, tmp_path, capsys):
+    """Issue 48: ``batch --truth`` prints and stores each frame's PSNR, mean spectral angle and peak ratio: those of
+    the written cube against its true cube."""
+    output = tmp_path / "out.h5"
+    assert main(command(video, output, "--iters", "5", "--truth", str(video["truth"]))) == 0
+    printed = capsys.readouterr().out
+    written, iterations, _ = cubes(output)
+    with h5py.File(video["truth"], "r") as f:
+        truth = f["cubes"][...]
+    with h5py.File(output, "r") as f:
+        attrs, warm = dict(f.attrs), f["warm"][...]
+    assert attrs["truth_path"] == str(video["truth"].resolve()) and attrs["truth_sha256"] == sha256(video["truth"])
+    lines = printed.split(f"against {video['truth']}:\n")[1].splitlines()
+    assert len(lines) == N_FRAMES and warm.sum() == N_FRAMES - 1
+    for i, line in enumerate(lines):
+        direct = psnr(written[i], truth[i]), spectral_angle(written[i], truth[i]), peak_ratio(written[i], truth[i])
+        assert (attrs["psnr"][i], attrs["spectral_angle"][i], attrs["peak_ratio"][i]) == direct
+        assert line == (f"  frame {i}: {'warm' if warm[i] else 'cold'}, {iterations[i]} iteration"
+                        f"{'s' * (int(iterations[i]) != 1)}: PSNR {direct[0]:.2f} dB, "
+                        f"mean spectral angle {direct[1]:.2f}°, peak ratio {direct[2]:.3f}")
+
+
 def test_batch_help_shows_defaults_and_ends_with_examples(capsys):
     with pytest.raises(SystemExit) as done:
         main(["batch", "--help"])
@@ -303,7 +326,7 @@ def test_external_scheduler_and_worker(video, tmp_path):
 
 def test_a_frame_damaged_during_the_run_is_recorded_and_the_rest_go_on(video, tmp_path, capsys, monkeypatch):
     """Every frame is checked before the run (tests/test_batch_checks.py); frames 3 and 6, damaged after that
-    check, fail with their reasons and the others go on."""
+    check, fail with their reasons and the others go on; against the truth they have no figures."""
     folder = tmp_path / "frames"
     folder.mkdir()
     frames = np.load(video["frames"])
@@ -319,12 +342,16 @@ def test_a_frame_damaged_during_the_run_is_recorded_and_the_rest_go_on(video, tm
 
     monkeypatch.setattr(stream, "_read", damaged_on_the_way)
     code = main(["batch", str(folder), "--calibration", str(video["calibration"]), "-o", str(tmp_path / "out.h5"),
-                 "--workers", "0", "--iters", "10", "--quiet"])
+                 "--workers", "0", "--iters", "10", "--quiet", "--truth", str(video["truth"])])
     assert code == 1
     got, _, errors = cubes(tmp_path / "out.h5")
     assert "non-finite" in errors[3] and "f06.npy" in errors[6] and np.isnan(got[[3, 6]]).all()
     assert np.isfinite(np.delete(got, [3, 6], axis=0)).all()
-    assert "frame 3" in capsys.readouterr().err
+    printed = capsys.readouterr()
+    assert "frame 3" in printed.err and "  frame 3: failed\n" in printed.out and "  frame 6: failed\n" in printed.out
+    with h5py.File(tmp_path / "out.h5", "r") as f:
+        psnrs = f.attrs["psnr"]
+    assert np.isnan(psnrs[[3, 6]]).all() and np.isfinite(np.delete(psnrs, [3, 6])).all()
 
 
 def test_simulate_frames_writes_a_video(tmp_path):

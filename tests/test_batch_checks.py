@@ -17,6 +17,7 @@ from clsdcam.batch.workers import Layout, plan_workers
 from clsdcam.camera.calibration import Preprocessing
 from clsdcam.cli import main
 from clsdcam.errors import InputError
+from clsdcam.io import read_wavelengths
 from clsdcam.sim.video import simulate_video, write_video
 from clsdcam.solve.solver import Settings, Solver
 
@@ -87,6 +88,34 @@ def test_an_unreadable_frame_file_is_refused_before_any_work(video, tmp_path, mo
     err = capsys.readouterr().err
     assert "f04.npy" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "out.h5").exists() and not parts_dir(tmp_path / "out.h5").exists()
+
+
+def false_truth(video, path, change):
+    """The video's truth.h5 copied to ``path`` with ``change`` made: fewer frames, one band more, other pixels,
+    other wavelengths."""
+    with h5py.File(video["truth"], "r") as f:
+        cubes, wavelengths = f["cubes"][...], read_wavelengths(f, 0)
+    changed = {"frames": (cubes[:-1], wavelengths), "pixels": (cubes[..., :-2], wavelengths),
+               "bands": (np.concatenate([cubes, cubes[:, :1]], axis=1), np.append(wavelengths, 900.0)),
+               "wavelengths": (cubes, wavelengths + 20.0)}[change]
+    with h5py.File(path, "w") as f:
+        f["cubes"], f["wavelength"] = changed
+    return path
+
+
+@pytest.mark.parametrize("change, message", [
+    ("frames", "5 true cubes for 6 frames"), ("bands", "3 bands where the calibration gives 2"),
+    ("pixels", "true cubes of 16×18 pixels for reconstructions of 16×20"),
+    ("wavelengths", "its wavelengths 534–790 nm are not the calibration's (514–770 nm)")])
+def test_a_truth_that_does_not_match_the_frames_is_refused_before_any_work(video, tmp_path, monkeypatch, capsys,
+                                                                           change, message):
+    """``batch --truth``: one line naming the truth and what differs, exit 2, nothing written."""
+    truth = false_truth(video, tmp_path / "truth.h5", change)
+    refuse_solving(monkeypatch)
+    assert main(batch(video["frames"], video, tmp_path / "out.h5", "--workers", "0", "--truth", str(truth))) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"clsdcam: error: --truth {truth}: {message}") and len(err.splitlines()) == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["truth.h5"]
 
 
 def test_a_stack_is_checked_block_by_block(video, tmp_path, monkeypatch):

@@ -299,7 +299,7 @@ def test_filters_defect_map_power_and_bands(tmp_path, capsys):
                  str(tmp_path / "edges.csv"), "-o", str(tmp_path / "f.h5"), "--png", str(tmp_path / "f")]) == 0
     assert "1 dead, 1 hot, 1 saturated" in capsys.readouterr().out
     with h5py.File(tmp_path / "f.h5", "r") as f:
-        dead, filters, wavelengths = f["dead_pixels"][...], f["filters"][...], f["wavelengths"][...]
+        dead, filters, wavelengths = f["dead_pixels"][...], f["filters"][...], f["wavelength"][...]
         assert "psf" not in f
     expected = np.zeros((6, 8), bool)
     expected[1, 1] = expected[2, 3] = expected[4, 5] = True
@@ -387,7 +387,7 @@ def test_simulated_sweep_recovers_the_filters_and_the_reconstruction(lab, tmp_pa
                  "--psf", str(lab / "psf_calibration.h5"), "-o", str(tmp_path / "recovered.h5")]) == 0
     recovered = Calibration.load(tmp_path / "recovered.h5")
     with h5py.File(lab / "true_filters.h5", "r") as f:         # the truth at the sweep's resolution, same bands
-        true = integrate_bands(f["wavelengths"][...], f["filters"][...], equal_edges(16, 386, 898))
+        true = integrate_bands(f["wavelength"][...], f["filters"][...], equal_edges(16, 386, 898))
     true /= true.max()
     assert np.linalg.norm(recovered.filters - true) / np.linalg.norm(true) < 0.02
     assert not recovered.dead_pixels.any()

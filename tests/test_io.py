@@ -92,3 +92,61 @@ def test_save_measurement_round_trip(tmp_path):
     frame = np.random.default_rng(1).random((6, 7))
     for name in ("a.npy", "a.h5"):
         np.testing.assert_allclose(load_measurement(save_measurement(tmp_path / name, frame)), frame, rtol=1e-7)
+
+
+# ---- one name for the wavelengths ---------------------------------------------------------------
+WAVELENGTHS = np.array([450.0, 550.0, 650.0])
+CUBE = np.random.default_rng(2).random((3, 4, 5)).astype(np.float32)
+
+
+def written_files(folder) -> dict:
+    """{what: path} of each kind of file clsdcam writes with band wavelengths (``sweep``: the sweep's true filters)."""
+    from clsdcam.batch import parts
+    from clsdcam.camera.calibration import Calibration
+    from clsdcam.sim.camera import write_truth
+    from clsdcam.sim.sweep import sweep_of, write_sweep
+    from clsdcam.sim.video import write_video
+    from clsdcam.sim import simulate
+
+    calibration = Calibration(np.ones((4, 5)), np.ones((3, 4, 5)), WAVELENGTHS)
+    write_cube(folder / "cube.h5", CUBE, WAVELENGTHS)
+    write_truth(folder / "truth.h5", CUBE, WAVELENGTHS)
+    video = write_video(folder / "video", calibration, np.ones((2, 4, 5), np.float32), np.stack([CUBE, CUBE]))
+    with h5py.File(folder / "part.h5", "w") as f:
+        parts.write_cube(f, 0, 1, CUBE, WAVELENGTHS)
+    sweep = write_sweep(folder / "sweep", simulate("leds", (16, 16), 2), sweep_of(WAVELENGTHS, np.ones((3, 16, 16))))
+    return {"cube": folder / "cube.h5", "truth": folder / "truth.h5", "calibration": video["calibration"],
+            "video truth": video["truth"], "batch part": folder / "part.h5", "sweep": sweep["true_filters"]}
+
+
+def test_every_file_names_its_wavelengths_wavelength_in_nm(tmp_path):
+    for what, path in written_files(tmp_path).items():
+        with h5py.File(path, "r") as f:
+            assert "wavelength" in f and "wavelengths" not in f, what
+            np.testing.assert_array_equal(f["wavelength"][...], WAVELENGTHS, err_msg=what)
+            assert f["wavelength"].attrs["units"] == "nm", what
+
+
+def test_files_with_the_old_name_still_read(tmp_path):
+    """Calibrations, truths (one cube, a video) and batch parts written before the one name, with ``wavelengths``."""
+    from clsdcam.batch import parts
+    from clsdcam.camera.calibration import Calibration
+    from clsdcam.export import read_source
+
+    with h5py.File(tmp_path / "calibration.h5", "w") as f:
+        f["psf"], f["filters"], f["wavelengths"] = np.ones((4, 5)), np.ones((3, 4, 5)), WAVELENGTHS
+    with h5py.File(tmp_path / "truth.h5", "w") as f:
+        f["cube"], f["wavelengths"] = CUBE, WAVELENGTHS
+    with h5py.File(tmp_path / "video.h5", "w") as f:
+        f["cubes"], f["wavelengths"] = np.stack([CUBE, CUBE]), WAVELENGTHS
+    folder = parts.parts_dir(tmp_path / "out.h5")
+    folder.mkdir()
+    (folder / "batch.json").write_text('{"fingerprint": "old"}')
+    with h5py.File(parts.part_path(folder, 0, 1), "w") as f:
+        f["cubes"], f["wavelengths"] = CUBE[None], WAVELENGTHS
+        parts.write_columns(f, {"index": [0], "iterations": [5], "seconds": [1.0], "warm": [False],
+                                "stop_reason": ["budget"], "error": [""]})
+    parts.assemble(tmp_path / "out.h5", 1, {}, {})
+    np.testing.assert_array_equal(Calibration.load(tmp_path / "calibration.h5").wavelengths, WAVELENGTHS)
+    for path in ("truth.h5", "video.h5", "out.h5"):
+        np.testing.assert_array_equal(read_source(tmp_path / path)["wavelengths"], WAVELENGTHS, err_msg=path)

@@ -39,7 +39,7 @@ def test_a_batch_output_and_a_video_truth_open_frame_by_frame(tmp_path):
                  "-o", str(tmp_path / "cubes.h5"), "--workers", "0", "--iters", "3", "--cold-iters", "3",
                  "--quiet"]) == 0
     with h5py.File(video / "truth.h5", "r") as f:
-        truth, wavelengths = f["cubes"][...], f["wavelengths"][...]
+        truth, wavelengths = f["cubes"][...], f["wavelength"][...]
     with h5py.File(tmp_path / "cubes.h5", "r") as f:
         cubes = f["cubes"][...]
     for path, expected in ((tmp_path / "cubes.h5", cubes), (video / "truth.h5", truth)):

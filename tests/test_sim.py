@@ -390,7 +390,7 @@ def test_write_simulation(tmp_path):
     np.testing.assert_array_equal(np.load(paths["measurement"]), result.measurement)
     with h5py.File(paths["truth"], "r") as f:
         np.testing.assert_array_equal(f["cube"][...], result.truth)
-        np.testing.assert_allclose(f["wavelengths"][...], BANDS8)
+        np.testing.assert_allclose(f["wavelength"][...], BANDS8)
     with h5py.File(paths["calibration"], "r") as f:
         np.testing.assert_array_equal(f["psf"][...], result.calibration.psf)
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["calibration.h5", "measurement.npy", "truth.h5"]

@@ -4,6 +4,7 @@ a command writes (and said so in --help), and the smaller wording defects. Every
 in-process, at the smallest sizes."""
 import errno
 import os
+import re
 import struct
 import subprocess
 import sys
@@ -107,9 +108,9 @@ def test_simulate_reads_the_real_cube_from_the_data_option(tmp_path, monkeypatch
 def test_analyze_resolution_prints_each_measured_psf_it_skips_and_why(tmp_path, capsys):
     assert main(["analyze", "resolution", str(tmp_path / "a"), "--size", "32x48", "--data", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
-    assert (f"resolution: DiffuserCam tutorial (measured) skipped: psf/diffusercam_tutorial_psf_sample.tif not "
-            f"present in {tmp_path} (from --data)") in printed
-    assert "Spectral DiffuserScope (measured) skipped" in printed
+    assert (f"  autocorrelation resolution, DiffuserCam tutorial (measured): skipped: "
+            f"psf/diffusercam_tutorial_psf_sample.tif not present in {tmp_path} (from --data)") in printed
+    assert "Spectral DiffuserScope (measured): skipped" in printed
 
 
 def test_analyze_resolution_measures_a_psf_from_the_data_option(tmp_path, capsys):
@@ -118,8 +119,8 @@ def test_analyze_resolution_measures_a_psf_from_the_data_option(tmp_path, capsys
     np.save(tmp_path / "psf" / "spectraldiffuserscope_psf.npy", np.exp(-((y - 20) ** 2 + (x - 28) ** 2) / 8.0))
     assert main(["analyze", "resolution", str(tmp_path / "a"), "--size", "32x48", "--data", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
-    assert "Spectral DiffuserScope (measured) skipped" not in printed and "DiffuserCam tutorial (measured) skipped" \
-        in printed
+    assert re.search(r"Spectral DiffuserScope \(measured\): [\d.]+ px = ", printed)
+    assert "DiffuserCam tutorial (measured): skipped" in printed
     assert (tmp_path / "a" / "resolution_spectraldiffuserscope_psf.png").exists()
 
 

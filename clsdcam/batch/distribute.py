@@ -2,7 +2,8 @@
 
 Checks. Before anything is written, every frame still to compute is read once and checked
 (:meth:`FrameSource.check`): a frame that cannot be read or holds a NaN/Inf stops the batch with
-one line naming it and its first bad pixel.
+one line naming it and its first bad pixel; so does a truth that does not match the frames
+(:class:`~clsdcam.batch.truth.TruthVideo`).
 
 Workers. Where the chunks run, processes × threads, is :func:`clsdcam.batch.workers.plan_workers`'s
 choice (never more than the cores), said in the summary.
@@ -37,27 +38,31 @@ from ..provenance import provenance
 from .frames import FrameSource
 from .parts import assemble, chunks, claim, finished_parts, missing_frames, part_path, parts_dir
 from .spec import BatchInterrupted, BatchSpec, BatchSummary
-from .stream import Carried, failure_text, run_stream, solve_chunk
+from .stream import Carried, failure_text, frame_calibration, run_stream, solve_chunk
+from .truth import TruthVideo
 from .workers import chunk_threads, connect, plan_workers
 
 
 def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None = None, chunk: int | None = None,
-              overwrite: bool = False, progress=None, on_plan=None) -> BatchSummary:
+              overwrite: bool = False, progress=None, on_plan=None, truth=None) -> BatchSummary:
     """Reconstruct every frame not yet in ``output``'s parts, then (re)build ``output``.
 
     ``workers`` = 0 (and no scheduler): one in-process stream (warm starts carried across its
     chunks); otherwise Dask distributed, an embedded LocalCluster (``workers`` processes at most, as
     :func:`plan_workers` chooses) or the cluster at ``scheduler``. ``chunk`` defaults to
     ⌈missing / workers⌉, at most MAX_CHUNK. ``on_plan(n_frames, n_missing, layout)`` is called once
-    the missing frames are known, ``progress(k)`` as k more frames are done. InputError before any
-    work, nothing written, if ``output`` (or its parts folder) cannot be written or a frame to
-    compute cannot be read or is not finite, or the video extra is not installed (:mod:`clsdcam.extras`).
+    the missing frames are known, ``progress(k)`` as k more frames are done. With ``truth`` (a video's
+    truth.h5) each frame is scored against its true cube (:mod:`clsdcam.batch.truth`). InputError before
+    any work, nothing written, if ``output`` (or its parts folder) cannot be written, a frame to
+    compute cannot be read or is not finite, ``truth`` does not match the frames, or the video extra is not
+    installed (:mod:`clsdcam.extras`).
     """
     require("batch")
     output, spec = check_output(Path(output).resolve()), _resolved(spec)
     source = FrameSource(spec.frames)
     n, parts = len(source), parts_dir(output)
     source.check(range(n) if overwrite else missing_frames(parts, n))
+    scored = None if truth is None else TruthVideo(truth, n, frame_calibration(spec, source.read(0)))
     layout = plan_workers(workers, scheduler)
     if overwrite:
         shutil.rmtree(parts, ignore_errors=True)
@@ -69,10 +74,16 @@ def run_batch(spec: BatchSpec, output, workers: int = 1, scheduler: str | None =
             on_plan(n, len(missing), layout)
         start = time.perf_counter()
         lost = _compute(spec, parts, missing, (layout, chunk), _Progress(progress))
-        summary = assemble(output, n, lost, provenance({"frames": source.paths, "calibration": spec.calibration},
-                                                       spec.preprocessing))
+        summary = assemble(output, n, lost, provenance(_inputs(spec, source, scored), spec.preprocessing),
+                           None if scored is None else scored.score)
     summary.computed_frames, summary.seconds, summary.layout = len(missing), time.perf_counter() - start, str(layout)
     return summary
+
+
+def _inputs(spec: BatchSpec, source: FrameSource, truth: TruthVideo | None) -> dict:
+    """The input files whose paths and SHA-256 the output records: the frames, the calibration, the truth."""
+    inputs = {"frames": source.paths, "calibration": spec.calibration}
+    return inputs if truth is None else {**inputs, "truth": truth.path.resolve()}
 
 
 def _resolved(spec: BatchSpec) -> BatchSpec:

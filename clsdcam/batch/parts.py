@@ -2,7 +2,7 @@
 
 Parts. Chunk [s, e) is written into a temporary file renamed to
 ``OUT.h5.parts/chunk-SSSSSS-EEEEEE.h5``: a part is whole or absent. It holds ``cubes``
-(e − s, K, H, W) (NaN where a frame failed), ``wavelengths`` and per-frame ``index``,
+(e − s, K, H, W) (NaN where a frame failed), ``wavelength`` and per-frame ``index``,
 ``iterations``, ``stop_reason``, ``seconds``, ``error``, ``warm`` (started from the previous frame's state).
 
 Resume. A frame is done when some part covers it; a re-run computes only the others (any
@@ -17,7 +17,8 @@ Output. ``OUT.h5`` holds ``cubes`` (N,K,H,W), an HDF5 virtual dataset over the p
 where a frame failed), with dimension scales ``frame``, ``wavelength`` (nm), ``y``, ``x`` as
 single cubes have them (xarray's h5netcdf engine reads them as dims and coordinates), per-frame
 ``iterations``, ``stop_reason``, ``seconds``, ``error``, ``warm`` (on the ``frame`` scale), and as
-attributes the provenance (:mod:`clsdcam.provenance`) and the batch's settings; it is
+attributes the provenance (:mod:`clsdcam.provenance`), the batch's settings and, against a truth
+(:mod:`clsdcam.batch.truth`), the per-frame ``psnr``, ``spectral_angle`` and ``peak_ratio``; it is
 rebuilt, atomically, at the end of every run.
 """
 from __future__ import annotations
@@ -32,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io import atomic_output, check_output
+from ..io import atomic_output, attach_scales, check_output, read_wavelengths, write_wavelengths
 from .spec import BatchSpec, BatchSummary
 
 MAX_CHUNK = 64          # default chunk cap: bounds the work a crash loses and keeps tasks balanced
@@ -127,7 +128,7 @@ def write_cube(out, j: int, n: int, cube: np.ndarray, wavelengths):
     """Cube j of the part's n (``cubes`` is created, NaN-filled, with the first one)."""
     if "cubes" not in out:
         out.create_dataset("cubes", (n,) + cube.shape, np.float32, chunks=(1,) + cube.shape, fillvalue=np.nan)
-        out["wavelengths"] = wavelengths
+        write_wavelengths(out, wavelengths)
     out["cubes"][j] = cube
 
 
@@ -150,9 +151,10 @@ def read_records(part: Path) -> list[dict]:
 
 
 # ---- the output -------------------------------------------------------------------------------
-def assemble(output: Path, n: int, lost: dict[int, str], attrs: dict) -> BatchSummary:
+def assemble(output: Path, n: int, lost: dict[int, str], attrs: dict, score=None) -> BatchSummary:
     """OUT.h5: a virtual ``cubes`` over the parts (NaN where a frame failed or is ``lost``) with its dimension
-    scales, per-frame records, and ``attrs`` (the provenance) beside the batch's settings."""
+    scales, per-frame records, and ``attrs`` (the provenance) beside the batch's settings; with ``score``
+    (``cubes`` → {name: per-frame figures}, :meth:`clsdcam.batch.truth.TruthVideo.score`) its figures too."""
     import h5py
 
     per_frame, layout, wavelengths = _gather(parts_dir(output), n)
@@ -164,23 +166,13 @@ def assemble(output: Path, n: int, lost: dict[int, str], attrs: dict) -> BatchSu
     with atomic_output(output) as tmp, h5py.File(tmp, "w") as f:
         cubes = f.create_virtual_dataset("cubes", layout, fillvalue=np.nan)
         write_columns(f, per_frame)
-        _attach_scales(f, cubes, wavelengths, per_frame)
+        attach_scales(f, cubes, wavelengths)
+        for key in per_frame:
+            f[key].dims[0].attach_scale(f["frame"])
         f.attrs.update({**attrs, **json.loads((parts_dir(output) / "batch.json").read_text())})
-    return BatchSummary(n_frames=n, computed_frames=0, failed=failed)
-
-
-def _attach_scales(f, cubes, wavelengths, columns):
-    """``cubes``' dimension scales: ``frame`` (also on the per-frame ``columns``), ``wavelength`` (nm), ``y``, ``x``."""
-    n, _, h, w = cubes.shape
-    axes = {"frame": np.arange(n), "wavelength": np.asarray(wavelengths, np.float64), "y": np.arange(h),
-            "x": np.arange(w)}
-    for axis, (label, values) in enumerate(axes.items()):
-        f[label] = values
-        f[label].make_scale(label)
-        cubes.dims[axis].attach_scale(f[label])
-    f["wavelength"].attrs.update(units="nm", long_name="band centre wavelength")
-    for key in columns:
-        f[key].dims[0].attach_scale(f["frame"])
+        accuracy = score(cubes) if score is not None else {}
+        f.attrs.update(accuracy)
+    return BatchSummary(n_frames=n, computed_frames=0, failed=failed, per_frame=per_frame, accuracy=accuracy)
 
 
 def _gather(parts: Path, n: int):
@@ -197,7 +189,8 @@ def _gather(parts: Path, n: int):
         with h5py.File(path, "r") as part:
             if "cubes" not in part:
                 continue
-            shape, wavelengths = part["cubes"].shape, part["wavelengths"][...]
+            shape = part["cubes"].shape
+            wavelengths = read_wavelengths(part, shape[1])
             layout = layout or h5py.VirtualLayout(shape=(n,) + shape[1:], dtype=np.float32)
             layout[s:e] = h5py.VirtualSource(f"{path.parent.name}/{path.name}", "cubes", shape=shape)
     return per_frame, layout, wavelengths

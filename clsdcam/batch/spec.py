@@ -47,6 +47,8 @@ class BatchSummary:
     failed: list[tuple[int, str]] = field(default_factory=list)
     seconds: float = 0.0
     layout: str = ""  # where the frames ran, e.g. "2 workers × 1 thread on 2 cores"
+    per_frame: dict = field(default_factory=dict)   # the output's per-frame records: iterations, warm, error, …
+    accuracy: dict = field(default_factory=dict)    # against a truth: {figure: per-frame values} (else empty)
 
     @property
     def exit_code(self) -> int:

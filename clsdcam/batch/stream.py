@@ -168,12 +168,24 @@ def cached_calibration(calibration: str) -> Calibration:
     return Calibration.load(calibration)
 
 
+def frame_calibration(spec: BatchSpec, frame) -> Calibration:
+    """The calibration that frames like ``frame`` (as read) are reconstructed with: their cubes are
+    (K,) + its shape, at its wavelengths."""
+    frame, _ = raw_steps(cached_calibration(spec.calibration), frame, spec.preprocessing)
+    return prepared_calibration(spec.calibration, spec.preprocessing, frame.shape)
+
+
+def prepared_calibration(calibration: str, preprocessing: Preprocessing, frame_shape: tuple[int, ...]) -> Calibration:
+    """The calibration file preprocessed for frames of ``frame_shape`` (after their raw steps)."""
+    return preprocess(cached_calibration(calibration), np.zeros(frame_shape), preprocessing)[0]
+
+
 @functools.lru_cache(maxsize=SOLVERS_KEPT)
 def cached_solver(calibration: str, preprocessing: Preprocessing, settings: Settings, backend: str,
                   device: str | None, fft: str, path: str, frame_shape: tuple[int, ...]):
     """(solver, wavelengths) for frames of ``frame_shape`` (after their raw steps), built on first use in this
     process."""
-    prepared, _ = preprocess(cached_calibration(calibration), np.zeros(frame_shape), preprocessing)
+    prepared = prepared_calibration(calibration, preprocessing, frame_shape)
     solver = Solver(prepared, backend=backend, device=_worker_device(backend, device), settings=settings, fft=fft,
                     path=path)
     return solver, np.asarray(prepared.wavelengths)

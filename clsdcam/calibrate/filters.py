@@ -7,7 +7,7 @@ the PSF's centring shift is applied to F and the defect map so that pixel (y, x)
 a measurement is the same sensor pixel. The sweep must then be cropped and binned as the PSF was (same size;
 the same crop and bin when both come from frames of the same raw size).
 
-Without ``--psf`` the file holds the filter part only (``filters`` (K, H, W), ``wavelengths`` (K,),
+Without ``--psf`` the file holds the filter part only (``filters`` (K, H, W), ``wavelength`` (K,),
 ``band_edges`` (K + 1,), ``dead_pixels`` (H, W)): no ``psf``, so it is not a calibration on its own.
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, shape_text
-from ..io import atomic_output
+from ..io import atomic_output, write_wavelengths
 from .bands import band_centres, check_edges, integrate_bands
 from .dark import resolve_dark
 from .defects import Defects, find_defects
@@ -95,7 +95,7 @@ def save_filters_only(path, result: FilterCalibration, source: str) -> Path:
     path = Path(path)
     with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
         f["filters"] = result.filters
-        f["wavelengths"] = result.wavelengths
+        write_wavelengths(f, result.wavelengths)
         f["band_edges"] = result.edges
         f["dead_pixels"] = result.defects.mask
         f.attrs["source"] = source

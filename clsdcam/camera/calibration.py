@@ -3,7 +3,8 @@
 Layouts read:
 - the paper's ``calibration.mat``: ``psf`` (H,W), ``mask`` (H,W,K), ``wavs`` (1,K) or (K,1),
   in MATLAB v5 (scipy.io) or v7.3 (HDF5; MATLAB stores arrays transposed, undone here);
-- our HDF5: ``psf`` (H,W), ``filters`` (K,H,W), ``wavelengths`` (K,); optionally ``dead_pixels`` (H,W) bool
+- our HDF5: ``psf`` (H,W), ``filters`` (K,H,W), ``wavelength`` (K,) (``wavelengths`` in files written before
+  :data:`clsdcam.io.WAVELENGTH`); optionally ``dead_pixels`` (H,W) bool
   (pixels left out of every reconstruction, from ``clsdcam calibrate filters``) and a group ``raw``: the steps that
   turned raw frames into the calibration's size (:mod:`clsdcam.camera.raw`), which ``prepare`` applies to a
   measurement of the recorded raw size.
@@ -25,8 +26,8 @@ import numpy as np
 
 from .raw import RawSteps, read_record, write_record
 from ..errors import InputError, shape_text
-from ..io import (MAX_DATASET_BYTES, as_real_array, atomic_output, existing_file, first_line, read_dataset,
-                  require_finite)
+from ..io import (MAX_DATASET_BYTES, WAVELENGTH, as_real_array, atomic_output, existing_file, first_line,
+                  read_dataset, require_finite, wavelength_key, write_wavelengths)
 
 REFERENCE_CROP = (100, 420, 80, 540)  # rows 100:420, cols 80:540 of the 494×659 raw frame
 DEFECT_HALF = 2                        # the reference zeroes [i−2:i+2, j−2:j+2]
@@ -103,7 +104,7 @@ class Calibration:
         with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
             f["psf"] = self.psf.astype(np.float32)
             f["filters"] = self.filters.astype(np.float32)
-            f["wavelengths"] = self.wavelengths.astype(np.float64)
+            write_wavelengths(f, self.wavelengths)
             f.attrs["source"] = self.source
             f.attrs["units_scale"] = self.scale
             if self.dead_pixels is not None:
@@ -139,7 +140,8 @@ def _read_hdf5_calibration(path: Path):
     try:
         with h5py.File(path, "r") as f:
             if "filters" in f:
-                return (*(read_dataset(f, key, f"calibration {path}") for key in ("psf", "filters", "wavelengths")),
+                keys = ("psf", "filters", wavelength_key(f) or WAVELENGTH)
+                return (*(read_dataset(f, key, f"calibration {path}") for key in keys),
                         _our_extras(f, f"calibration {path}"))
             contents = {key: read_dataset(f, key, f"calibration {path}").T for key in ("psf", "mask", "wavs") if key in f}
             contents["__keys__"] = list(f.keys())

@@ -1,6 +1,6 @@
 """``clsdcam analyze {resolution,condition,designs,spectral,twopoint,all} OUTDIR``: the paper's analyses
-(:mod:`clsdcam.analyses`), each writing ``NAME.json`` and ``NAME.png`` into OUTDIR; ``all`` also writes
-``report.html`` and ``summary.md`` and prints the summary table next to the paper's values."""
+(:mod:`clsdcam.analyses`), each writing ``NAME.json`` and ``NAME.png`` into OUTDIR and printing its key figures;
+``all`` also writes ``report.html`` and ``summary.md`` and prints the summary table next to the paper's values."""
 from __future__ import annotations
 
 import argparse
@@ -61,9 +61,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
-    """Run the chosen analyses; print where each went and what it skipped; for ``all`` the summary table and the
-    report."""
-    from ..analyses import RUNNERS, skipped_lines, summary_table, write_json, write_report
+    """Run the chosen analyses; print where each went and its key figures (what it skipped among them); for ``all``
+    the summary table and the report."""
+    from ..analyses import RUNNERS, figure_lines, summary_table, write_json, write_report
     from ..io import atomic_output, check_folder
 
     out = check_folder(args.outdir, f"output folder {args.outdir}")
@@ -75,8 +75,7 @@ def run(args) -> int:
         results[name]["seconds"] = round(time.perf_counter() - start, 1)
         write_json(out / f"{name}.json", results[name])
         print(f"{name}: {out / (name + '.json')}, {out / (name + '.png')} ({results[name]['seconds']:.0f} s)")
-        for line in skipped_lines(name, results[name]):
-            print(line)
+        print("\n".join(figure_lines(name, results[name])))
     if args.what == "all":
         table = summary_table(results)
         print(table)

@@ -8,7 +8,8 @@ from .options import (add_measurement_options, add_preprocessing_options, add_so
 
 
 EXAMPLES = examples(
-    "clsdcam batch video/frames.npy --calibration video/calibration.h5 -o cubes.h5 --workers 2 --iters 10",
+    "clsdcam batch video/frames.npy --calibration video/calibration.h5 -o cubes.h5 --workers 2 --iters 10 "
+    "--truth video/truth.h5",
     "clsdcam batch frames/ --calibration calibration.mat --reference-preprocess -o run.h5 --workers 0 --tol 1e-4",
     "clsdcam batch /shared/frames.h5 --calibration /shared/cal.mat -o /shared/cubes.h5 --scheduler tcp://host:8786",
     "# after Ctrl-C or a crash, the same command computes only the frames still missing")
@@ -38,6 +39,10 @@ def add_parser(subparsers):
                         f"{DEFAULT_ITERS} with the default --iters)")
     p.add_argument("--no-warm-start", action="store_true", help="start every frame from zero (each with --iters)")
     p.add_argument("--overwrite", action="store_true", help="recompute everything (default: only the missing frames)")
+    p.add_argument("--truth", default=None, metavar="TRUTH.h5",
+                   help="a simulated video's true cubes (truth.h5 of clsdcam simulate --frames), checked against the "
+                        "frames before any work: each frame's PSNR, mean spectral angle and peak ratio (its peaks "
+                        "over the truth's at the truth's brightest points) printed and stored in OUT.h5's attributes")
     add_solver_options(p)
     add_preprocessing_options(p)
     add_measurement_options(p, average=False)
@@ -58,9 +63,24 @@ def run(args) -> int:
     rate = summary.computed_frames / summary.seconds if summary.seconds else 0.0
     print(f"wrote {args.output}: {summary.n_frames} frames ({summary.computed_frames} computed now, "
           f"{rate:.2f} frames/s, on {summary.layout}), {len(summary.failed)} failed")
+    if summary.accuracy:
+        print(f"against {args.truth}:\n" + "\n".join(accuracy_lines(summary)))
     for index, reason in summary.failed:
         print(f"  frame {index}: {reason}", file=sys.stderr)
     return summary.exit_code
+
+
+def accuracy_lines(summary) -> list[str]:
+    """One line per frame: how it was solved (cold or warm, iterations) and its accuracy (or that it failed)."""
+    from .solve import accuracy_text
+
+    records, lines = summary.per_frame, []
+    for i in range(summary.n_frames):
+        start, iterations = "warm" if records["warm"][i] else "cold", int(records["iterations"][i])
+        figures = {name: values[i] for name, values in summary.accuracy.items()}
+        lines.append(f"  frame {i}: " + ("failed" if records["error"][i] else f"{start}, {iterations} iteration"
+                                         f"{'s' * (iterations != 1)}: {accuracy_text(figures)}"))
+    return lines
 
 
 def _run_batch(args):
@@ -76,7 +96,7 @@ def _run_batch(args):
     bars = []
     try:
         return run_batch(spec, args.output, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk,
-                         overwrite=args.overwrite, progress=lambda k: bars and bars[0].update(k),
+                         overwrite=args.overwrite, truth=args.truth, progress=lambda k: bars and bars[0].update(k),
                          on_plan=None if args.quiet else lambda n, missing, layout: bars.append(
                              _bar(n, n - missing, layout)))
     finally:

@@ -185,8 +185,14 @@ def data_fall(history: list[dict]) -> float | None:
 
 
 def print_accuracy(cube, truth, label=""):
-    from ..metrics import psnr, spectral_angle
+    from ..metrics import accuracy
 
     if truth.shape != cube.shape:
         raise InputError(f"--truth cube {shape_text(truth.shape)} does not match the result {shape_text(cube.shape)}")
-    print(f"{label}PSNR {psnr(cube, truth):.2f} dB, mean spectral angle {spectral_angle(cube, truth):.2f}°")
+    print(label + accuracy_text(accuracy(cube, truth)))
+
+
+def accuracy_text(figures: dict) -> str:
+    """:func:`clsdcam.metrics.accuracy`'s figures as printed."""
+    return (f"PSNR {figures['psnr']:.2f} dB, mean spectral angle {figures['spectral_angle']:.2f}°, "
+            f"peak ratio {figures['peak_ratio']:.3f}")

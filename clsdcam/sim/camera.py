@@ -23,7 +23,7 @@ import numpy as np
 from ..backends import NumpyBackend
 from ..camera.calibration import Calibration
 from ..errors import InputError
-from ..io import atomic_output, save_measurement
+from ..io import atomic_output, save_measurement, write_scaled
 from ..camera.model import ForwardModel
 from .caustic import caustic_psf
 from .filters import filter_array
@@ -107,10 +107,10 @@ def simulate(scene: str = "target", shape=None, n_bands: int | None = None, seed
 
 
 def write_truth(path: Path, truth: np.ndarray, wavelengths: np.ndarray) -> None:
-    """HDF5 with datasets ``cube`` (K, H, W) float32 and ``wavelengths`` (K,), written to a temp file then renamed."""
+    """HDF5 with ``cube`` (K, H, W) float32 and its dimension scales, ``wavelength`` (K,) in nm among them, as a
+    reconstructed cube has them (:func:`clsdcam.io.write_scaled`), written to a temp file then renamed."""
     with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
-        f.create_dataset("cube", data=truth.astype(np.float32))
-        f.create_dataset("wavelengths", data=np.asarray(wavelengths, dtype=np.float64))
+        write_scaled(f, "cube", truth.astype(np.float32), wavelengths)
 
 
 def write_simulation(outdir, sim: Simulation) -> dict[str, Path]:

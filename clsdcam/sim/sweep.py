@@ -20,7 +20,7 @@ its measurement and truth are simulated with them (:func:`.camera.simulate`).
 
 Files written: ``sweep/frame_NNNN_LLLnm.tif`` (16-bit, sorted by name = by wavelength), ``dark/dark_NN.tif``,
 ``sweep_wavelengths.csv`` (one column, nm), ``power.csv`` (wavelength nm, power), ``true_filters.h5``
-(``filters`` (N, H, W) = R(λ_i), ``wavelengths`` (N,)), ``psf_calibration.h5`` (the PSF as a one-band
+(``filters`` (N, H, W) = R(λ_i), ``wavelength`` (N,)), ``psf_calibration.h5`` (the PSF as a one-band
 calibration, as ``calibrate psf`` writes one), next to ``calibration.h5`` (the true K-band calibration),
 ``measurement.npy`` and ``truth.h5``.
 """
@@ -34,7 +34,7 @@ import numpy as np
 from ..calibrate.bands import equal_edges, integrate_bands
 from ..camera.calibration import Calibration
 from ..data import missing_text, shared_data_dir
-from ..io import atomic_output
+from ..io import atomic_output, write_wavelengths
 from ..camera.prototype import SPECTRAL_RANGE
 from .camera import Simulation, resolve_geometry, simulate, write_simulation
 from .filters import filter_array
@@ -130,7 +130,8 @@ def write_sweep(outdir, simulation: Simulation, sweep: SweepSimulation) -> dict[
                                             "wavelength (nm)")
     paths["power"] = _write_csv(outdir / "power.csv", sweep.power, "wavelength (nm),power (uW)")
     with atomic_output(outdir / "true_filters.h5") as tmp, h5py.File(tmp, "w") as f:
-        f["filters"], f["wavelengths"] = sweep.response, sweep.wavelengths
+        f["filters"] = sweep.response
+        write_wavelengths(f, sweep.wavelengths)
         f.attrs["note"] = "R(λ_i; y, x): the filter array's true response at each sweep wavelength"
     paths["true_filters"] = outdir / "true_filters.h5"
     psf = simulation.calibration.psf

@@ -5,7 +5,8 @@ Frame t shows the scene translated by t·(vy, vx) pixels (bilinear, zero fill),
     v(t)(y, x) = v(0)(y − t·vy, x − t·vx),   b(t) = max(Σ_k F_k ⊙ crop(h ∗ v(t)_k) + noise_t, 0),
 
 through one camera (PSF, filters) with fresh noise per frame (seed + t). Written as
-``frames.npy`` (N, H, W), ``truth.h5`` (``cubes`` (N, K, H, W)) and ``calibration.h5``.
+``frames.npy`` (N, H, W), ``truth.h5`` (``cubes`` (N, K, H, W) with the dimension scales of a batch output's, ``frame``,
+``wavelength`` (nm), ``y``, ``x``) and ``calibration.h5``.
 """
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from ..camera.calibration import Calibration
-from ..io import atomic_output
+from ..io import atomic_output, write_scaled
 from .camera import add_noise, noiseless_measurement
 from .caustic import caustic_psf
 from .filters import filter_array
@@ -55,6 +56,5 @@ def write_video(outdir, calibration, frames, truth) -> dict[str, Path]:
     with atomic_output(paths["frames"]) as tmp, open(tmp, "wb") as f:
         np.save(f, frames)
     with atomic_output(paths["truth"]) as tmp, h5py.File(tmp, "w") as f:
-        f["cubes"] = truth
-        f["wavelengths"] = calibration.wavelengths
+        write_scaled(f, "cubes", truth, calibration.wavelengths)
     return paths
