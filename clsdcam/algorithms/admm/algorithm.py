@@ -30,7 +30,7 @@ if TYPE_CHECKING:                 # the parser lists the algorithms: the steps' 
 
 # the penalties and every split's over-relaxation α, chosen for the iterations to the model's answer
 # (docs/convergence.md, "A faster ADMM"); docs/admm.md has the first choice, made for the first 100 iterations
-DATA, TV, NONNEG = 1e-2, 3e-3, 1e-2
+DATA, TV, NONNEG = 1e-2, 1e-2, 1e-2
 RELAXATION = 1.7
 
 
