@@ -129,7 +129,7 @@ def test_a_colour_psf_frame_is_called_a_psf_frame(tmp_path, capsys):
 def test_exporting_a_calibration_says_it_holds_no_cube_not_that_it_is_unreadable(sim, tmp_path, capsys):
     assert main(["export", str(sim / "calibration.h5"), "-o", str(tmp_path / "cube.tif")]) == 2
     assert one_line_error(capsys) == (f"clsdcam: error: cube {sim / 'calibration.h5'}: no dataset 'cube' "
-                                      "(found: filters, psf, wavelengths)")
+                                      "(found: filters, psf, wavelength)")
 
 
 def test_a_videos_truth_is_not_called_a_batch_output(tmp_path, capsys):
