@@ -440,8 +440,9 @@ def flat_numbers(numbers) -> np.ndarray:
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_admm_splits_tv_adjoint_and_division_match_numpy(dtype, axes, path):
     """From the same random state: the splits (x-, w- and u-steps with their duals and sums, over-relaxed), the TV
-    adjoint and the Fourier division (DCT along λ, divisors, Ĥ·v̂) agree with NumPy's to the elementwise rule (float64: 1e-12), with
-    TV on every axis, on some (the kernels skip the others), or none (zero-size split arrays)."""
+    adjoint and the Fourier division (DCT along λ, divisors, Ĥ·v̂) agree with NumPy's to the elementwise rule
+    (float64: 1e-12), with TV on every axis, on some (the kernels skip the others), or none (zero-size split
+    arrays)."""
     backend = opencl(dtype, PATH_BACKEND[path])
     pair = admm_pair(dtype, backend, TV_AXES[axes])
     assert [len(split.axes) for split in pair] == [3 - TV_AXES[axes].count(0.0) if TV_AXES[axes] else 0] * 2

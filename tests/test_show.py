@@ -33,7 +33,8 @@ def quadrant_of(shape, point) -> int | None:
 def test_spectrum_points_take_one_pixel_of_each_light_of_the_target(shape, bands):
     wavelengths = band_wavelengths(bands)
     points = spectrum_points(make_scene("target", shape, wavelengths), wavelengths)
-    assert [quadrant_of(shape, p) for p in points] == [0, 1, 2, 3]    # red, green, blue, white: as the README names them
+    # red, green, blue, white: as the README names them
+    assert [quadrant_of(shape, p) for p in points] == [0, 1, 2, 3]
 
 
 @pytest.mark.parametrize("bands", [4, 16, 64])

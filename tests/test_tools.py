@@ -241,7 +241,8 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
     scene = json.loads((tmp_path / "variants.json").read_text())["scenes"][0]
     plain, relaxed = scene["variants"]
     assert plain["variant"] == {"alpha": 1.0} and relaxed["variant"] == {"alpha": 1.7, "tv": 0.003}
-    assert [stop["iteration"] for stop in (plain["stops"][0], relaxed["stops"][0])] == [bench_converged.AUTO_AT + 100] * 2
+    first_stops = [stop["iteration"] for stop in (plain["stops"][0], relaxed["stops"][0])]
+    assert first_stops == [bench_converged.AUTO_AT + 100] * 2
     points = [{"iteration": 10, "psnr": 0.0, "angle": 0.0}, {"iteration": 20, "psnr": 9.0, "angle": 0.0},
               {"iteration": 30, "psnr": 0.0, "angle": 0.0}, {"iteration": 40, "psnr": 9.0, "angle": 1.0}]
     assert bench_converged.settled_within(points, {"psnr": 9.1, "angle": 0.6}) == 40

@@ -176,7 +176,7 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
     tau = float(weight_run.attrs["tv_chosen"])
     ref = reference({a: reference_run(sim, plan, tau, a, args.reference_iters, cache) for a in REFERENCE_ALGORITHMS})
     rows = []
-    for variant in parse_variants(args.variants):
+    for variant in args.variants:
         with admm_constants(variant):
             result, seconds = timed_solve(sim, {"tv": tau, "iters": args.variant_iters, "algorithm": "admm"},
                                           range(10, args.variant_iters + 1, 10))
@@ -328,7 +328,7 @@ def main(argv=None) -> int:
     add_backend_option(parser)
     args = parser.parse_args(argv)
     try:
-        parse_variants(args.variants)
+        args.variants = parse_variants(args.variants)
     except ValueError as error:
         parser.error(str(error))
     Where.use(args.backend)

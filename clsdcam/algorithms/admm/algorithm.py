@@ -117,7 +117,6 @@ class Admm(Algorithm):
     def resume(self, state, factor: float) -> None:
         """Go on from a previous solve's splits and duals (:meth:`carry`), every array times ``factor`` (its units to
         this solve's: the problem is homogeneous in b), instead of starting the duals afresh."""
-        for name in ("v", "hv", "x", "xi", "rho", "w", "eta", "s", "rest"):
-            array = getattr(state, name)
+        for array in state.arrays():
             self.backend.scale(factor, array, out=array)
         self._resumed = state

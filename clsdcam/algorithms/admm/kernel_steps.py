@@ -3,7 +3,8 @@
 :mod:`clsdcam.algorithms.admm`) on device arrays, on either path.
 
 * the splits are three kernels of ``kernels/admm.cl``: the x-step (one work item per field pixel, which also sums
-  the data term on the sensor window), the w-step (which also sums ‖w⁺ − w‖² and ‖w⁺‖²) and the u-step (every active TV axis in one pass);
+  the data term on the sensor window), the w-step (which also sums ‖w⁺ − w‖² and ‖w⁺‖²) and the u-step (every
+  active TV axis in one pass);
 * the c-step is the TV adjoint (one kernel), the backend's transforms (2K forward, 2K inverse), the right-hand side
   in Fourier (one kernel), the DCT along λ and its inverse as the backend's ``bandmix`` by the orthonormal DCT-II
   matrix on the spectrum's real and imaginary parts (a real K×K matrix mixes both alike), the division between them

@@ -3,7 +3,7 @@ the calibration's terms (built once per solver and kept in its shared store) and
 problem's scales the penalties are set from."""
 from __future__ import annotations
 
-from dataclasses import astuple, dataclass
+from dataclasses import astuple, dataclass, fields
 
 import numpy as np
 
@@ -37,6 +37,10 @@ class SplitState:
     s: np.ndarray
     rest: np.ndarray
     spectra: tuple
+
+    def arrays(self) -> list:
+        """Every array of the state but the spectra (what a resumed solve scales into its units)."""
+        return [getattr(self, f.name) for f in fields(self) if f.name != "spectra"]
 
 
 def band_eigenvalues(n_bands: int) -> np.ndarray:
