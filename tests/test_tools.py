@@ -14,6 +14,7 @@ import bench_converged  # noqa: E402
 import bench_iteration  # noqa: E402
 import bench_panel  # noqa: E402
 import bench_recon  # noqa: E402
+import bench_stop  # noqa: E402
 import compare_recon  # noqa: E402
 import compare_speed  # noqa: E402
 import rank_signals  # noqa: E402
@@ -248,6 +249,29 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
     assert bench_converged.settled_within(points, {"psnr": 9.1, "angle": 0.6}) == 40
     assert bench_converged.settled_within(points, {"psnr": 9.1, "angle": 0.0}) is None
     assert "| 0 | piecewise, standard | alpha 1.7, tv 0.003 |" in capsys.readouterr().out
+
+
+def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys, monkeypatch):
+    """The traced run of as many iterations as the reference is the reference: its last cube is at distance 0; at a
+    huge tolerance the steps' estimate fires after four windows (three ratios) and the net one a window later (its
+    first window starts at iteration 25); a stop's distance is its mark's; "stays within" reads every later mark."""
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    monkeypatch.setattr(bench_stop, "panel_kinds", lambda: ["piecewise"])
+    bench_stop.main(["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--iters", "150",
+                     "--reference-iters", "150", "--tolerances", "1e9", "--cache", str(tmp_path / "cache"),
+                     "--out", str(tmp_path)])
+    scene = json.loads((tmp_path / "stop.json").read_text())["scenes"][0]
+    marks = scene["marks"]
+    assert [m["iteration"] for m in marks] == list(range(5, 151, 5)) and marks[-1]["distance"] == 0.0
+    assert marks[0]["distance"] > 0.05
+    (steps,), (net,) = scene["stops"]["steps"], scene["stops"]["net"]
+    assert (steps["iteration"], net["iteration"]) == (100, 125)
+    assert steps["distance"] == marks[19]["distance"] and net["distance"] == marks[24]["distance"]
+    flags = [{"iteration": k, "within": w, "steps": s} for k, w, s in ((5, True, 9.0), (10, False, 0.1),
+                                                                       (15, True, 0.01))]
+    assert bench_stop.settled(flags)["iteration"] == 15
+    assert bench_stop.stop(flags, "steps", 0.5) == {**flags[1], "stays_within": False}
+    assert "| 0 | piecewise, standard |" in capsys.readouterr().out and (tmp_path / "stop.png").stat().st_size > 0
 
 
 def test_bench_admm_sweeps_the_relaxation_with_the_penalties(tmp_path, capsys):

@@ -84,10 +84,27 @@ def curve(sim, result) -> list[dict]:
              "seconds": seconds[k]} for k, cube in sorted(result.snapshots.items())]
 
 
-def reference_run(sim, plan: dict, tau: float, algorithm: str, iters: int, cache: Path) -> dict:
-    """One reference run's curve (cached by seed, size, τ, algorithm and iterations)."""
+def cached(sim, plan: dict, tau: float, algorithm: str, iters: int, cache: Path) -> tuple[str, Path]:
+    """A reference run's key and its file in ``cache`` (by seed, size, τ, algorithm and iterations)."""
     key = f"{plan['kind']}|{plan['level']}|{plan['seed']}|{sim.truth.shape}|{tau!r}|{algorithm}|{iters}"
-    path = cache / f"{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
+    return key, cache / f"{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
+
+
+def reference_cube(sim, plan: dict, tau: float, algorithm: str, iters: int, cache: Path) -> np.ndarray:
+    """A reference run's final cube (run and cached first when it is not in ``cache``)."""
+    reference_run(sim, plan, tau, algorithm, iters, cache)
+    return np.load(cached(sim, plan, tau, algorithm, iters, cache)[1])["cube"]
+
+
+def scene_weight(sim, weight_from: str) -> float:
+    """The scene's weight τ: the one today's run (``weight_from`` "today") or the default's ``--tv auto`` chose."""
+    weight_run, _ = timed_solve(sim, TODAY if weight_from == "today" else {})
+    return float(weight_run.attrs["tv_chosen"])
+
+
+def reference_run(sim, plan: dict, tau: float, algorithm: str, iters: int, cache: Path) -> dict:
+    """One reference run's curve (cached: :func:`cached`)."""
+    key, path = cached(sim, plan, tau, algorithm, iters, cache)
     if path.exists():
         stored = np.load(path, allow_pickle=False)
         return {"points": [dict(zip(stored["names"], map(float, row))) for row in stored["points"]],
@@ -172,8 +189,7 @@ def admm_constants(variant: dict):
 def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
     """One scene's ADMM variants at its weight (today's or the default's ``--tv auto`` choice) against its reference."""
     sim = panel_scene(plan, shape, bands)
-    weight_run, _ = timed_solve(sim, TODAY if args.weight_from == "today" else {})
-    tau = float(weight_run.attrs["tv_chosen"])
+    tau = scene_weight(sim, args.weight_from)
     ref = reference({a: reference_run(sim, plan, tau, a, args.reference_iters, cache) for a in REFERENCE_ALGORITHMS})
     rows = []
     for variant in args.variants:
