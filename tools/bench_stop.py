@@ -30,6 +30,7 @@ from bench_accuracy import Where, add_backend_option, panel_parser, report, size
 from bench_converged import (ANGLE_DEG, PSNR_DB, reference, reference_cube, reference_run, scene_weight,
                              timed_solve)
 from bench_panel import panel_kinds, panel_scene, scene_plan
+from clsdcam.cli.options import WORK
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
 from clsdcam.solve.convergence import WINDOW, DistanceEstimate
@@ -149,7 +150,8 @@ def main(argv=None) -> int:
     parser.add_argument("--iters", type=int, default=600, help="the traced run's iterations (default 600)")
     parser.add_argument("--every", type=int, default=5, help="keep a cube every this many (divides 25; default 5)")
     parser.add_argument("--reference-iters", type=int, default=1500, help="each reference run's (default 1500)")
-    parser.add_argument("--cache", required=True, help="bench_converged's folder of cached reference runs")
+    parser.add_argument("--cache", default=f"{WORK}/converged-cache",
+                        help="folder of cached reference runs (bench_converged's, and its default)")
     parser.add_argument("--weight-from", choices=("default", "today"), default="today",
                         help="whose --tv auto choice is the scene's weight (default: today's)")
     parser.add_argument("--tolerances", default="0.07,0.05,0.03", help="the estimates' stopping tolerances")
