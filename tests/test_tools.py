@@ -267,9 +267,10 @@ def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys
     (steps,), (net,) = scene["stops"]["steps"], scene["stops"]["net"]
     assert (steps["iteration"], net["iteration"]) == (100, 125)
     assert steps["distance"] == marks[19]["distance"] and net["distance"] == marks[24]["distance"]
-    flags = [{"iteration": k, "within": w, "steps": s} for k, w, s in ((5, True, 9.0), (10, False, 0.1),
-                                                                       (15, True, 0.01))]
-    assert bench_stop.settled(flags)["iteration"] == 15
+    ref = {"psnr": 9.0, "angle": 1.0}
+    flags = [{"iteration": k, "psnr": p, "angle": 0.0, "within": p >= 8.8, "steps": s}
+             for k, p, s in ((5, 9.0, 9.0), (10, 0.0, 0.1), (15, 9.0, 0.01))]
+    assert bench_stop.settled(flags, ref)["iteration"] == 15
     assert bench_stop.stop(flags, "steps", 0.5) == {**flags[1], "stays_within": False}
     assert "| 0 | piecewise, standard |" in capsys.readouterr().out and (tmp_path / "stop.png").stat().st_size > 0
 

@@ -91,8 +91,7 @@ def cached(sim, plan: dict, tau: float, algorithm: str, iters: int, cache: Path)
 
 
 def reference_cube(sim, plan: dict, tau: float, algorithm: str, iters: int, cache: Path) -> np.ndarray:
-    """A reference run's final cube (run and cached first when it is not in ``cache``)."""
-    reference_run(sim, plan, tau, algorithm, iters, cache)
+    """A reference run's final cube, from ``cache`` (where :func:`reference_run` put it)."""
     return np.load(cached(sim, plan, tau, algorithm, iters, cache)[1])["cube"]
 
 
@@ -123,10 +122,14 @@ def reference(runs: dict) -> dict:
     return {"psnr": max(p["psnr"] for p in finals), "angle": min(p["angle"] for p in finals)}
 
 
+def within(point: dict, ref: dict) -> bool:
+    """Whether a scored ``point`` is within the answer's tolerance of ``ref`` (rule 2)."""
+    return point["psnr"] >= ref["psnr"] - PSNR_DB and point["angle"] <= ref["angle"] + ANGLE_DEG
+
+
 def first_within(points: list[dict], ref: dict) -> dict | None:
     """The first scored mark within the answer's tolerance of ``ref``, or None."""
-    return next((p for p in points if p["psnr"] >= ref["psnr"] - PSNR_DB and p["angle"] <= ref["angle"] + ANGLE_DEG),
-                None)
+    return next((p for p in points if within(p, ref)), None)
 
 
 def time_within(points: list[dict], ref: dict) -> float | None:
@@ -153,7 +156,7 @@ def replay_stop(run: dict, tolerance: float) -> dict | None:
 
 def settled_within(points: list[dict], ref: dict) -> int | None:
     """The first scored mark from which every mark is within the answer's tolerance of ``ref``, or None."""
-    inside = [p["psnr"] >= ref["psnr"] - PSNR_DB and p["angle"] <= ref["angle"] + ANGLE_DEG for p in points]
+    inside = [within(p, ref) for p in points]
     return next((int(points[i]["iteration"]) for i in range(len(points)) if all(inside[i:])), None)
 
 

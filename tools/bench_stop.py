@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from bench_accuracy import Where, add_backend_option, panel_parser, report, size_text
-from bench_converged import (ANGLE_DEG, PSNR_DB, reference, reference_cube, reference_run, scene_weight,
-                             timed_solve)
+from bench_converged import (REFERENCE_ALGORITHMS, reference, reference_cube, reference_run, scene_weight,
+                             settled_within, timed_solve, within)
 from bench_panel import panel_kinds, panel_scene, scene_plan
 from clsdcam.cli.options import WORK
 from clsdcam.metrics import psnr, spectral_angle
@@ -64,15 +64,17 @@ def traced_run(sim, tau: float, iters: int, every: int, xstar: np.ndarray, ref: 
     net = dict(zip(ends[1:], replay(moves, 1)))
     marks = []
     for k, cube in sorted(result.snapshots.items()):
-        within = psnr(cube, sim.truth) >= ref["psnr"] - PSNR_DB and spectral_angle(cube, sim.truth) <= ref["angle"] + ANGLE_DEG
-        marks.append({"iteration": k, "distance": relative(cube, xstar), "within": bool(within),
-                      "steps": steps[k - 1] if k % WINDOW == 0 else float("nan"), "net": net.get(k, float("nan"))})
+        mark = {"iteration": k, "psnr": psnr(cube, sim.truth), "angle": spectral_angle(cube, sim.truth),
+                "distance": relative(cube, xstar), "steps": steps[k - 1] if k % WINDOW == 0 else float("nan"),
+                "net": net.get(k, float("nan"))}
+        marks.append({**mark, "within": within(mark, ref)})
     return marks
 
 
-def settled(marks: list[dict]) -> dict | None:
-    """The first mark from which every mark is within the rules, or None."""
-    return next((m for i, m in enumerate(marks) if all(n["within"] for n in marks[i:])), None)
+def settled(marks: list[dict], ref: dict) -> dict | None:
+    """The first mark from which every mark is within the rules (:func:`bench_converged.settled_within`), or None."""
+    iteration = settled_within(marks, ref)
+    return next((m for m in marks if m["iteration"] == iteration), None)
 
 
 def stop(marks: list[dict], name: str, tolerance: float) -> dict | None:
@@ -86,10 +88,11 @@ def stop(marks: list[dict], name: str, tolerance: float) -> dict | None:
 def run_scene(plan: dict, args, cache: Path) -> dict:
     sim = panel_scene(plan, args.size, args.bands)
     tau = scene_weight(sim, args.weight_from)
-    ref = reference({a: reference_run(sim, plan, tau, a, args.reference_iters, cache) for a in ("fista", "admm")})
+    ref = reference({a: reference_run(sim, plan, tau, a, args.reference_iters, cache)
+                     for a in REFERENCE_ALGORITHMS})
     xstar = reference_cube(sim, plan, tau, "admm", args.reference_iters, cache)
     marks = traced_run(sim, tau, args.iters, args.every, xstar, ref)
-    return {**plan, "tv": tau, "reference": ref, "marks": marks, "settled": settled(marks),
+    return {**plan, "tv": tau, "reference": ref, "marks": marks, "settled": settled(marks, ref),
             "stops": {name: [stop(marks, name, t) for t in args.tolerances] for name in ESTIMATES}}
 
 
@@ -128,7 +131,8 @@ def plot(results: dict, path: Path, per_row: int = 5):
         ax.semilogy([m["iteration"] for m in marks], [m["distance"] for m in marks], "k", label="true distance")
         for name in ESTIMATES:
             points = [(m["iteration"], m[name]) for m in marks if np.isfinite(m[name])]
-            ax.semilogy(*zip(*points), ".-", ms=3, label=f"{name} estimate") if points else None
+            if points:
+                ax.semilogy(*zip(*points), ".-", ms=3, label=f"{name} estimate")
         if scene["settled"]:
             ax.axvline(scene["settled"]["iteration"], color="0.5", ls="--", label="within the rules from")
         ax.set(title=f"{scene['index']}: {scene['kind']}, {scene['level']}", xlabel="iteration",
