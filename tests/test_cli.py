@@ -137,6 +137,22 @@ def test_devices_lists_the_opencl_devices(capsys):
     assert "fp64" in capsys.readouterr().out
 
 
+def test_devices_without_an_opencl_driver_says_so_and_that_auto_runs_numpy(monkeypatch, capsys):
+    """The core install has no OpenCL driver: ``clsdcam devices`` says so in one line, names the install, and ends
+    with the backend the default then runs (exit 0: nothing found is its answer)."""
+    from clsdcam.backends import cl_devices
+    from clsdcam.errors import InputError
+
+    def no_platform():
+        raise InputError(f"no OpenCL platform found (clGetPlatformIDs failed); {cl_devices.INSTALL_HINT}")
+
+    monkeypatch.setattr(cl_devices, "all_devices", no_platform)
+    assert main(["devices"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("no OpenCL platform found") and "clsdcam[pocl]" in lines[0]
+    assert lines[-1] == "backend: numpy (auto: no OpenCL GPU)"
+
+
 def every_help_command() -> list[list[str]]:
     """Every command and sub-choice, as the argument list that asks for its help."""
     from clsdcam.cli.analyze import ANALYSES

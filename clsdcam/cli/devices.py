@@ -16,9 +16,15 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
+    """The table, or the one line that says why there is none (no pyopencl, no driver: the core install without
+    an extra), then the backend ``auto`` chooses: numpy when nothing is found, which is an answer, not an error."""
     from ..backends import format_devices
+    from ..errors import InputError
     from .solve import chosen_backend
 
-    print(format_devices())
+    try:
+        print(format_devices())
+    except InputError as nothing:
+        print(nothing)
     chosen_backend(Namespace(backend="auto", device=None))
     return 0
