@@ -256,7 +256,7 @@ def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys
     huge tolerance the steps' estimate fires after four windows (three ratios) and the net one a window later (its
     first window starts at iteration 25); a stop's distance is its mark's; "stays within" reads every later mark."""
     monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
-    monkeypatch.setattr(bench_stop, "panel_kinds", lambda: ["piecewise"])
+    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
     bench_stop.main(["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--iters", "150",
                      "--reference-iters", "150", "--tolerances", "1e9", "--cache", str(tmp_path / "cache"),
                      "--out", str(tmp_path)])

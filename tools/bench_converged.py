@@ -329,16 +329,40 @@ def plot(results: dict, path: Path, per_row: int = 5):
     fig.savefig(path, dpi=90)
 
 
+WEIGHT_FROM = {"default": "the default's", "today": "today's"}   # --weight-from: whose --tv auto choice
+
+
+def add_panel_options(parser, scenes: int, reference_iters: int, weight_from: str, seed_required: bool = False):
+    """The options of a tool on this module's panel and its reference cache (bench_stop's too): --scenes, --seed,
+    --only, --reference-iters, --cache and --weight-from, with the tool's defaults."""
+    parser.add_argument("--scenes", type=int, default=scenes, help=f"random scenes (kinds in turn; default {scenes})")
+    parser.add_argument("--seed", type=int, default=None, required=seed_required,
+                        help="the panel" + ("" if seed_required else " to replay (default: fresh entropy)"))
+    parser.add_argument("--only", default="", metavar="I[,J...]", help="these scenes of the panel alone")
+    parser.add_argument("--reference-iters", type=int, default=reference_iters,
+                        help=f"each reference run's iterations (default {reference_iters})")
+    parser.add_argument("--cache", default=f"{WORK}/converged-cache", help="folder of cached reference runs")
+    parser.add_argument("--weight-from", choices=tuple(WEIGHT_FROM), default=weight_from,
+                        help=f"whose --tv auto choice is the scene's weight (default: {WEIGHT_FROM[weight_from]})")
+
+
+def chosen_scenes(parser, args, seed: int) -> list[tuple[int, dict]]:
+    """The panel's (index, plan) pairs that --only keeps (all without it); an index outside the panel is the
+    parser's error."""
+    only = {int(i) for i in args.only.split(",") if i}
+    if not all(0 <= i < args.scenes for i in only):
+        parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
+    return [(i, plan) for i, plan in enumerate(scene_plan(args.scenes, seed, panel_kinds())) if not only or i in only]
+
+
+def scene_done(index: int, plan: dict, scenes: int):
+    print(f"  scene {index + 1}/{scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
+
+
 def main(argv=None) -> int:
     parser = panel_parser(__doc__.splitlines()[0], "converged", named_scenes=False)
     parser.set_defaults(size=(128, 160))
-    parser.add_argument("--scenes", type=int, default=20, help="random scenes (kinds in turn; default 20)")
-    parser.add_argument("--seed", type=int, default=None, help="replay a panel (default: fresh entropy)")
-    parser.add_argument("--only", default="", metavar="I[,J...]", help="replay these scenes of the panel alone")
-    parser.add_argument("--reference-iters", type=int, default=3000, help="each reference run's iterations")
-    parser.add_argument("--cache", default=f"{WORK}/converged-cache", help="folder of cached reference runs")
-    parser.add_argument("--weight-from", choices=("default", "today"), default="default",
-                        help="whose --tv auto choice is the scene's weight (default: the default's)")
+    add_panel_options(parser, scenes=20, reference_iters=3000, weight_from="default")
     parser.add_argument("--replay", default="0.1,0.05,0.03",
                         help="tolerances at which to replay the stop on the reference runs (the table's last part)")
     parser.add_argument("--variants", default="", metavar="NAME=V[,…][;…]",
@@ -351,10 +375,8 @@ def main(argv=None) -> int:
     except ValueError as error:
         parser.error(str(error))
     Where.use(args.backend)
-    only = {int(i) for i in args.only.split(",") if i}
-    if not all(0 <= i < args.scenes for i in only):
-        parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
+    chosen = chosen_scenes(parser, args, seed)
     out, cache = Path(args.out), Path(args.cache)
     out.mkdir(parents=True, exist_ok=True)
     cache.mkdir(parents=True, exist_ok=True)
@@ -364,13 +386,11 @@ def main(argv=None) -> int:
     args.tolerances = results["replay"]
     name = "variants" if args.variants else "converged"
     print(f"panel seed {seed}", file=sys.stderr, flush=True)
-    for i, plan in enumerate(scene_plan(args.scenes, seed, panel_kinds())):
-        if only and i not in only:
-            continue
+    for i, plan in chosen:
         scene = (variant_runs(plan, args.size, args.bands, args, cache) if args.variants else
                  run_scene(plan, args.size, args.bands, args.reference_iters, cache, args.weight_from))
         results["scenes"].append({"index": i, **scene})
-        print(f"  scene {i + 1}/{args.scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
+        scene_done(i, plan, args.scenes)
         save_json(out, name, results)
     if args.variants:
         report(out, name, results, "\n".join(variant_rows(results)))

@@ -27,10 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from bench_accuracy import Where, add_backend_option, panel_parser, report, size_text
-from bench_converged import (REFERENCE_ALGORITHMS, reference, reference_cube, reference_run, scene_weight,
-                             settled_within, timed_solve, within)
-from bench_panel import panel_kinds, panel_scene, scene_plan
-from clsdcam.cli.options import WORK
+from bench_converged import (REFERENCE_ALGORITHMS, add_panel_options, chosen_scenes, reference, reference_cube,
+                             reference_run, scene_done, scene_weight, settled_within, timed_solve, within)
+from bench_panel import panel_scene
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
 from clsdcam.solve.convergence import WINDOW, DistanceEstimate
@@ -148,16 +147,9 @@ def plot(results: dict, path: Path, per_row: int = 5):
 def main(argv=None) -> int:
     parser = panel_parser(__doc__.splitlines()[0], "stop", named_scenes=False)
     parser.set_defaults(size=(64, 80), bands=32)
-    parser.add_argument("--scenes", type=int, default=10, help="random scenes (kinds in turn; default 10)")
-    parser.add_argument("--seed", type=int, required=True, help="the panel (bench_converged's --seed)")
-    parser.add_argument("--only", default="", metavar="I[,J...]", help="these scenes of the panel alone")
+    add_panel_options(parser, scenes=10, reference_iters=1500, weight_from="today", seed_required=True)
     parser.add_argument("--iters", type=int, default=600, help="the traced run's iterations (default 600)")
     parser.add_argument("--every", type=int, default=5, help="keep a cube every this many (divides 25; default 5)")
-    parser.add_argument("--reference-iters", type=int, default=1500, help="each reference run's (default 1500)")
-    parser.add_argument("--cache", default=f"{WORK}/converged-cache",
-                        help="folder of cached reference runs (bench_converged's, and its default)")
-    parser.add_argument("--weight-from", choices=("default", "today"), default="today",
-                        help="whose --tv auto choice is the scene's weight (default: today's)")
     parser.add_argument("--tolerances", default="0.07,0.05,0.03", help="the estimates' stopping tolerances")
     add_backend_option(parser)
     args = parser.parse_args(argv)
@@ -165,18 +157,16 @@ def main(argv=None) -> int:
         parser.error(f"--every {args.every} must divide the stop's window ({WINDOW})")
     Where.use(args.backend)
     args.tolerances = [float(t) for t in args.tolerances.split(",")]
-    only = {int(i) for i in args.only.split(",") if i}
+    chosen = chosen_scenes(parser, args, args.seed)
     out, cache = Path(args.out), Path(args.cache)
     out.mkdir(parents=True, exist_ok=True)
     cache.mkdir(parents=True, exist_ok=True)
     results = {"seed": args.seed, "size": size_text(args.size), "bands": args.bands, "iters": args.iters,
                "reference_iters": args.reference_iters, "weight_from": args.weight_from,
                "tolerances": args.tolerances, "scenes": []}
-    for i, plan in enumerate(scene_plan(args.scenes, args.seed, panel_kinds())):
-        if only and i not in only:
-            continue
+    for i, plan in chosen:
         results["scenes"].append({"index": i, **run_scene(plan, args, cache)})
-        print(f"  scene {i + 1}/{args.scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
+        scene_done(i, plan, args.scenes)
     report(out, "stop", results, markdown(results))
     plot(results, out / "stop.png")
     return 0
