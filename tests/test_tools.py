@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+import admm_acceleration  # noqa: E402
 import bench_accuracy  # noqa: E402
 import bench_admm  # noqa: E402
 import bench_breakdown  # noqa: E402
@@ -249,6 +250,71 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
     assert bench_converged.settled_within(points, {"psnr": 9.1, "angle": 0.6}) == 40
     assert bench_converged.settled_within(points, {"psnr": 9.1, "angle": 0.0}) is None
     assert "| 0 | piecewise, standard | alpha 1.7, tv 0.003 |" in capsys.readouterr().out
+
+
+def test_anderson_point_is_an_affine_maps_fixed_point_after_as_many_differences_as_dimensions():
+    """For T(q) = Mq + c in R³, three differences span the space: the Anderson point is the fixed point (I − M)⁻¹c,
+    which the plain iterates are still far from; with no difference it is the newest map."""
+    rng = np.random.default_rng(5)
+    m, c = 0.9 * np.linalg.qr(rng.normal(size=(3, 3)))[0], rng.normal(size=3)
+    q, maps, residuals = rng.normal(size=3), [], []
+    for _ in range(4):
+        g = m @ q + c
+        maps.append([g])
+        residuals.append([g - q])
+        q = g
+    fixed = np.linalg.solve(np.eye(3) - m, c)
+    dot = lambda a, b: float(np.vdot(a[0], b[0]))
+    assert np.linalg.norm(q - fixed) > 0.1
+    point = admm_acceleration.anderson_point(maps, residuals, dot)[0]
+    np.testing.assert_allclose(point, fixed, rtol=1e-6)        # the ridge's 1e-10·trace, magnified by the fit
+    assert admm_acceleration.anderson_point(maps[:1], residuals[:1], dot)[0] is maps[0][0]
+
+
+def test_the_split_inputs_give_back_the_state_the_splits_left(monkeypatch):
+    """Writing the splits' inputs read from the state after the splits gives back every array of that state, at
+    every iteration of a solve with all three splits and over-relaxation."""
+    from clsdcam.algorithms.admm.terms import SplittingBase
+
+    plain, checked = SplittingBase.iterate, []
+
+    def iterate(split, state):
+        result = plain(split, state)
+        before = {n: getattr(state, n).copy() for n in admm_acceleration.LINEAR_IN_SPLITS}
+        admm_acceleration.set_split_inputs(split, state, admm_acceleration.split_inputs(split, state))
+        for name, array in before.items():
+            np.testing.assert_allclose(getattr(state, name), array, rtol=1e-5, atol=1e-6 * np.abs(array).max())
+        checked.append(True)
+        return result
+
+    monkeypatch.setattr(SplittingBase, "iterate", iterate)
+    plan = bench_panel.scene_plan(1, 3, ["piecewise"])[0]
+    sim = bench_panel.panel_scene(plan, (24, 32), 4)
+    bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 12, "algorithm": "admm"})
+    assert len(checked) == 12
+
+
+def test_bench_converged_measures_the_accelerations_and_restores_the_iteration(tmp_path, capsys, monkeypatch):
+    """``momentum`` and ``anderson`` variants run other curves than the plain ADMM, count their restarts, and leave
+    the host iteration as it was; on OpenCL they are refused."""
+    from clsdcam.algorithms.admm.terms import SplittingBase
+
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
+    plain = SplittingBase.iterate
+    args = ["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--reference-iters", "150",
+            "--variants", "alpha=1.7;alpha=1.7,momentum=0.999;alpha=1.7,anderson=3", "--variant-iters", "60",
+            "--replay", "1e9", "--cache", str(tmp_path / "cache"), "--out", str(tmp_path)]
+    bench_converged.main(args)
+    assert SplittingBase.iterate is plain
+    rows = json.loads((tmp_path / "variants.json").read_text())["scenes"][0]["variants"]
+    assert rows[0]["restarts"] == 0 and rows[1]["restarts"] > 0 and isinstance(rows[2]["restarts"], int)
+    finals = [r["final"]["psnr"] for r in rows]
+    assert len(set(finals)) == 3
+    assert "| 0 | piecewise, standard | alpha 1.7, anderson 3 |" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        bench_converged.main(args + ["--backend", "opencl"])
+    assert "wrap the host steps" in capsys.readouterr().err
 
 
 def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys, monkeypatch):

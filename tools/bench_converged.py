@@ -30,7 +30,9 @@ cached reference runs.
 ``--variants 'alpha=1.7,tv=0.003;alpha=1'`` measures ADMM's constants instead (``clsdcam.algorithms.admm``'s DATA,
 TV, NONNEG and RELAXATION, by the names data, tv, nonneg and alpha): each variant runs ``--variant-iters`` at the
 scene's weight, scored every 10 iterations, and the table gives the mark from which it stays within the rules and
-where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``variants.json``).
+where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``variants.json``). The names
+``momentum`` (restart factor η) and ``anderson`` (memory m) run one of :mod:`admm_acceleration`'s accelerations
+(host steps; "restarts" counts its restarts or dropped points).
 """
 from __future__ import annotations
 
@@ -42,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from admm_acceleration import ACCELERATIONS, accelerated
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text
 from bench_panel import panel_kinds, panel_scene, scene_plan
 from clsdcam.cli.options import WORK
@@ -161,6 +164,7 @@ def settled_within(points: list[dict], ref: dict) -> int | None:
 
 
 ADMM_CONSTANTS = {"data": "DATA", "tv": "TV", "nonneg": "NONNEG", "alpha": "RELAXATION"}
+VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS)      # the constants, and the accelerations (admm_acceleration)
 
 
 def parse_variants(text: str) -> list[dict]:
@@ -168,21 +172,22 @@ def parse_variants(text: str) -> list[dict]:
     variants = []
     for part in filter(None, text.split(";")):
         pairs = [item.split("=") for item in part.split(",")]
-        if any(len(p) != 2 or p[0] not in ADMM_CONSTANTS for p in pairs):
-            raise ValueError(f"--variants {part!r}: NAME=VALUE pairs, names {', '.join(ADMM_CONSTANTS)}")
+        if any(len(p) != 2 or p[0] not in VARIANT_NAMES for p in pairs):
+            raise ValueError(f"--variants {part!r}: NAME=VALUE pairs, names {', '.join(VARIANT_NAMES)}")
         variants.append({name: float(value) for name, value in pairs})
     return variants
 
 
 @contextmanager
 def admm_constants(variant: dict):
-    """ADMM's module constants set to ``variant`` (restored after)."""
+    """ADMM's module constants set to ``variant``'s (restored after; its other names are not constants)."""
     from clsdcam.algorithms.admm import algorithm
 
     saved = {name: getattr(algorithm, name) for name in ADMM_CONSTANTS.values()}
     try:
         for key, value in variant.items():
-            setattr(algorithm, ADMM_CONSTANTS[key], value)
+            if key in ADMM_CONSTANTS:
+                setattr(algorithm, ADMM_CONSTANTS[key], value)
         yield
     finally:
         for name, value in saved.items():
@@ -196,26 +201,27 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
     ref = reference({a: reference_run(sim, plan, tau, a, args.reference_iters, cache) for a in REFERENCE_ALGORITHMS})
     rows = []
     for variant in args.variants:
-        with admm_constants(variant):
+        with admm_constants(variant), accelerated(variant) as events:
             result, seconds = timed_solve(sim, {"tv": tau, "iters": args.variant_iters, "algorithm": "admm"},
                                           range(10, args.variant_iters + 1, 10))
         run = {"points": curve(sim, result), "change": [r["change"] for r in result.history]}
         rows.append({"variant": variant, "within": settled_within(run["points"], ref),
                      "stops": [replay_stop(run, t) for t in args.tolerances],
-                     "ms_per_iteration": 1e3 * seconds / args.variant_iters})
+                     "ms_per_iteration": 1e3 * seconds / args.variant_iters, "restarts": events["restarts"],
+                     "final": run["points"][-1]})
     return {**plan, "tv": tau, "reference": ref, "variants": rows}
 
 
 def variant_rows(results: dict) -> list[str]:
     tolerances = results["replay"]
-    rows = ["| # | kind | variant | stays within from | " + " | ".join(f"stop at {t:g}" for t in tolerances) + " |",
-            "|---:|---|---|---|" + "---|" * len(tolerances)]
+    rows = ["| # | kind | variant | stays within from | restarts | "
+            + " | ".join(f"stop at {t:g}" for t in tolerances) + " |", "|---:|---|---|---|---:|" + "---|" * len(tolerances)]
     for s in results["scenes"]:
         for v in s["variants"]:
             name = ", ".join(f"{k} {x:g}" for k, x in v["variant"].items()) or "as built"
             cells = [stop_cell(stop, s["reference"]) for stop in v["stops"]]
             rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {name} | {v['within'] or '–'} | "
-                        + " | ".join(cells) + " |")
+                        f"{v['restarts']} | " + " | ".join(cells) + " |")
     return rows
 
 
@@ -366,7 +372,8 @@ def main(argv=None) -> int:
     parser.add_argument("--replay", default="0.1,0.05,0.03",
                         help="tolerances at which to replay the stop on the reference runs (the table's last part)")
     parser.add_argument("--variants", default="", metavar="NAME=V[,…][;…]",
-                        help="measure ADMM's constants instead (names: data, tv, nonneg, alpha; the docstring)")
+                        help="measure ADMM's constants or accelerations instead (names: data, tv, nonneg, alpha, "
+                             "momentum, anderson; the docstring)")
     parser.add_argument("--variant-iters", type=int, default=500, help="each variant's iterations (default 500)")
     add_backend_option(parser)
     args = parser.parse_args(argv)
@@ -374,6 +381,8 @@ def main(argv=None) -> int:
         args.variants = parse_variants(args.variants)
     except ValueError as error:
         parser.error(str(error))
+    if args.backend != "numpy" and any(set(v) & set(ACCELERATIONS) for v in args.variants):
+        parser.error("--variants momentum/anderson wrap the host steps: --backend numpy")
     Where.use(args.backend)
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
     chosen = chosen_scenes(parser, args, seed)

@@ -1,0 +1,182 @@
+"""Two accelerations of ADMM, measured as ``bench_converged --variants`` (names ``momentum`` and ``anderson``) and
+not built into the solver (docs/convergence.md, "What was tried and lost", has their numbers). Both wrap the host
+steps' iteration (:class:`~clsdcam.algorithms.admm.host_steps.Splitting`) for the duration of a variant.
+
+ADMM as a fixed-point map. Each split takes the point q = α·K v + (1 − α)·z + y (K the split's operator: H, D_d
+or I; z its variable, y its scaled dual), sets z = prox(q) and y = q − z, and the next c-step reads z − y. So q, on
+the three splits (data, TV per axis, non-negativity), is the whole state: one iteration is a map q ← T(q), and q
+is read back from the state as x + ξ (ξ on the sensor window only), u_d + η_d = s_d + 2η_d and w + ρ
+(:func:`split_inputs`), and written by the splits' proxes (:func:`set_split_inputs`). Norms weight each split by
+its penalty: ‖q‖² = μ₁‖q_data‖² + μ₂Σ‖q_d‖² + μ₃‖q_nonneg‖².
+
+* **momentum** = η: Goldstein, O'Donoghue, Setzer and Baraniuk 2014 (fast ADMM for weakly convex problems, their
+  Algorithm 8): Nesterov's extrapolation of the splits and duals, ẑ = z_k + (a_k − 1)/a_{k+1}·(z_k − z_{k−1}) and
+  the same for y, restarted (a = 1, back to z_{k−1}, y_{k−1}) whenever the combined residual
+  c_k = Σ μ(‖y_k − ŷ_k‖² + ‖z_k − ẑ_k‖²) fails to fall below η·c_{k−1}. Every array of the state after the splits is
+  linear in (z, y), so each is extrapolated alike.
+* **anderson** = m: type-II Anderson acceleration of T with memory m: with f = T(q) − q, the point
+  T(q_k) − Σ_j γ_j ΔT_j where γ minimises ‖f_k − Σ_j γ_j Δf_j‖ over the last m differences; safeguarded as Zhang
+  et al. 2019 accelerate ADMM: an extrapolated point whose residual ‖f‖ does not fall is dropped for the plain step
+  from the point before, and the memory cleared.
+"""
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+import numpy as np
+
+ACCELERATIONS = ("momentum", "anderson")        # the variant names this module reads
+LINEAR_IN_SPLITS = ("x", "w", "s", "eta", "xi", "rho", "hv", "rest")   # the state's arrays after the splits
+
+
+def split_inputs(split, state) -> list[np.ndarray]:
+    """q on the data, TV and non-negativity splits, from the state after the splits."""
+    h, w = split.sensor_shape
+    data = state.x.copy()
+    data[:, :h, :w] += state.xi
+    return [data, state.s + 2 * state.eta, state.w + state.rho]
+
+
+def set_split_inputs(split, state, q: list[np.ndarray]) -> None:
+    """The state the splits leave from the inputs ``q``: each prox and dual, and what the c-step reads (x − ξ in
+    ``hv``, μ₃(w − ρ) in ``rest``, s_d = u_d − η_d)."""
+    h, w = split.sensor_shape
+    data, tv, nonneg = q
+    window = data[:, :h, :w]
+    misfit = split.b - np.einsum("khw,khw->hw", split.filters, window)
+    np.multiply(split._gain, -misfit, out=state.xi)
+    state.x[...] = data
+    state.x[:, :h, :w] -= state.xi
+    state.hv[...] = state.x
+    state.hv[:, :h, :w] -= state.xi
+    for i, axis in enumerate(split.axes):
+        bound = split.threshold(axis)
+        np.clip(tv[i], -bound, bound, out=state.eta[i])
+        np.subtract(tv[i], 2 * state.eta[i], out=state.s[i])
+    np.maximum(nonneg - split.nonneg_shift(), 0, out=state.w)
+    np.subtract(nonneg, state.w, out=state.rho)
+    np.multiply(split.penalties.nonneg, state.w - state.rho, out=state.rest)
+
+
+def weighted_dot(split, a: list, b: list) -> float:
+    """Σ_j μ_j⟨a_j, b_j⟩ over the three splits."""
+    p = split.penalties
+    return sum(mu * float(np.vdot(x.ravel(), y.ravel()).real)
+               for mu, x, y in zip((p.data, p.tv, p.nonneg), a, b))
+
+
+def anderson_point(g: list, f: list, dot) -> list:
+    """The type-II Anderson point from the history of maps g_i = T(q_i) and residuals f_i (oldest first, the last is
+    the newest): g_k − Σ_j γ_j(g_{j+1} − g_j), γ the least-squares fit of f_k by the residuals' differences (normal
+    equations, a 1e-10 relative ridge). Each entry is a list of arrays; ``dot`` their inner product."""
+    newest, n = g[-1], len(f) - 1
+    if n == 0:
+        return newest
+    diff = lambda h, j: [a - b for a, b in zip(h[j + 1], h[j])]
+    df = [diff(f, j) for j in range(n)]
+    gram = np.array([[dot(df[i], df[j]) for j in range(n)] for i in range(n)])
+    gamma = np.linalg.solve(gram + 1e-10 * np.trace(gram) * np.eye(n), [dot(d, f[-1]) for d in df])
+    point = [a.copy() for a in newest]
+    for j in range(n):
+        for part, step in zip(point, diff(g, j)):
+            part -= part.dtype.type(gamma[j]) * step
+    return point
+
+
+class Momentum:
+    """Fast ADMM with restart (the module docstring), one per solve; ``events`` counts the restarts."""
+
+    def __init__(self, eta: float, events: dict):
+        self.eta, self.events = eta, events
+        self.previous, self.residual, self.a = None, None, 1.0
+
+    def __call__(self, split, plain_iterate, state):
+        """One iteration: the c-step, the splits (their inputs' residual against the extrapolated point), then the
+        next extrapolated point or the restart (``plain_iterate`` is not used: the residual needs the splits' inputs
+        in between)."""
+        split.c_step(state)
+        hat = {n: getattr(state, n).copy() for n in ("x", "w", "s", "eta", "xi", "rho")}
+        result = split.splits(state, split.relaxation)
+        residual = self.combined_residual(split, state, hat)
+        current = {n: getattr(state, n).copy() for n in LINEAR_IN_SPLITS}
+        if self.previous is not None and residual >= self.eta * self.residual:
+            for n in LINEAR_IN_SPLITS:
+                getattr(state, n)[...] = self.previous[n]
+            self.a, self.residual = 1.0, self.residual / self.eta
+            self.events["restarts"] += 1
+        elif self.previous is not None:
+            a = (1 + np.sqrt(1 + 4 * self.a ** 2)) / 2
+            for n in LINEAR_IN_SPLITS:
+                array = getattr(state, n)
+                array += array.dtype.type((self.a - 1) / a) * (array - self.previous[n])
+            self.a, self.residual = a, residual
+        else:
+            self.residual = residual
+        self.previous = current
+        return result
+
+    @staticmethod
+    def combined_residual(split, state, hat: dict) -> float:
+        """Σ μ(‖y − ŷ‖² + ‖z − ẑ‖²), with u_d = s_d + η_d."""
+        now = [state.x, state.xi, state.s + state.eta, state.eta, state.w, state.rho]
+        before = [hat["x"], hat["xi"], hat["s"] + hat["eta"], hat["eta"], hat["w"], hat["rho"]]
+        p = split.penalties
+        weights = (p.data, p.data, p.tv, p.tv, p.nonneg, p.nonneg)
+        return sum(mu * float(np.sum((a - b).astype(np.float64) ** 2)) for mu, a, b in zip(weights, now, before))
+
+
+class Anderson:
+    """Anderson-accelerated ADMM (the module docstring), one per solve; ``events`` counts the dropped points."""
+
+    def __init__(self, memory: int, events: dict):
+        self.memory, self.events = memory, events
+        self.point, self.plain, self.residual = None, None, None
+        self.maps, self.residuals = [], []
+
+    def __call__(self, split, plain_iterate, state):
+        """One plain iteration from the current point, then the next Anderson point or the safeguard's fallback."""
+        q = split_inputs(split, state) if self.point is None else self.point
+        result = plain_iterate(split, state)
+        g = split_inputs(split, state)
+        f = [a - b for a, b in zip(g, q)]
+        residual = weighted_dot(split, f, f)
+        if self.plain is not None and residual >= self.residual:
+            self.events["restarts"] += 1
+            self.point, self.plain, self.maps, self.residuals = self.plain, None, [], []
+            set_split_inputs(split, state, self.point)
+            return result
+        self.residual = residual
+        self.maps = (self.maps + [g])[-(self.memory + 1):]
+        self.residuals = (self.residuals + [f])[-(self.memory + 1):]
+        self.point = anderson_point(self.maps, self.residuals, lambda a, b: weighted_dot(split, a, b))
+        self.plain = g if len(self.maps) > 1 else None
+        if self.plain is not None:
+            set_split_inputs(split, state, self.point)
+        return result
+
+
+@contextmanager
+def accelerated(variant: dict):
+    """ADMM's host iteration wrapped by the acceleration ``variant`` names (none: as built), restored after; yields
+    the events (restarts or dropped points) it counts."""
+    from clsdcam.algorithms.admm.terms import SplittingBase
+
+    events = {"restarts": 0}
+    plain = SplittingBase.iterate
+    named = [name for name in ACCELERATIONS if name in variant]
+    if not named:
+        yield events
+        return
+    factory = {"momentum": Momentum, "anderson": Anderson}[named[0]]
+    value = int(variant["anderson"]) if factory is Anderson else variant["momentum"]
+
+    def iterate(split, state):
+        if "_acceleration" not in split.__dict__:      # one per solve: each solve builds its own steps
+            split._acceleration = factory(value, events)
+        return split._acceleration(split, plain, state)
+
+    SplittingBase.iterate = iterate
+    try:
+        yield events
+    finally:
+        SplittingBase.iterate = plain
