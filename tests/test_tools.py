@@ -294,23 +294,64 @@ def test_the_split_inputs_give_back_the_state_the_splits_left(monkeypatch):
     assert len(checked) == 12
 
 
+def test_spectral_estimate_reads_a_linear_pairs_slope_and_refuses_a_non_monotone_one():
+    """Δλ = cΔx: both spectral estimates are c, the correlation 1; Δλ = −Δx is not monotone; the penalty takes the
+    geometric mean of two usable estimates, the one usable, or stays."""
+    step = np.random.default_rng(2).normal(size=50)
+    estimate, correlation = admm_acceleration.spectral_estimate(step, 3.0 * step)
+    assert estimate == pytest.approx(3.0) and correlation == pytest.approx(1.0)
+    assert admm_acceleration.spectral_estimate(step, -step) == (None, 0.0)
+    assert admm_acceleration.spectral_penalty(1.0, (4.0, 0.9), (9.0, 0.5)) == pytest.approx(6.0)
+    assert admm_acceleration.spectral_penalty(1.0, (4.0, 0.1), (9.0, 0.5)) == 9.0
+    assert admm_acceleration.spectral_penalty(1.0, (None, 0.0), (9.0, 0.1)) == 1.0
+
+
+def test_a_penalty_change_keeps_the_splits_and_the_unscaled_duals(monkeypatch):
+    """After new penalties the splits z and the unscaled duals μy are as before (a fixed point stays one)."""
+    from clsdcam.algorithms.admm.terms import Penalties, SplittingBase
+
+    plain, checked = SplittingBase.iterate, []
+
+    def iterate(split, state):
+        result = plain(split, state)
+        p = split.penalties
+        z, y = admm_acceleration.split_variables(split, state)
+        new = Penalties(2 * p.data, 0.5 * p.tv, 3 * p.nonneg)
+        admm_acceleration.change_penalties(split, state, new)
+        z2, y2 = admm_acceleration.split_variables(split, state)
+        for before, after, ratio in zip(y, y2, (2, 0.5, 3)):
+            np.testing.assert_allclose(ratio * after, before, rtol=1e-5, atol=1e-6 * (np.abs(before).max() + 1))
+        for before, after in zip(z, z2):
+            np.testing.assert_allclose(after, before, rtol=1e-5, atol=1e-6 * (np.abs(before).max() + 1))
+        checked.append(split.penalties is new)
+        return result
+
+    monkeypatch.setattr(SplittingBase, "iterate", iterate)
+    plan = bench_panel.scene_plan(1, 3, ["piecewise"])[0]
+    bench_converged.timed_solve(bench_panel.panel_scene(plan, (24, 32), 4), {"tv": 1e-3, "iters": 6,
+                                                                              "algorithm": "admm"})
+    assert checked == [True] * 6
+
+
 def test_bench_converged_measures_the_accelerations_and_restores_the_iteration(tmp_path, capsys, monkeypatch):
-    """``momentum`` and ``anderson`` variants run other curves than the plain ADMM, count their restarts, and leave
-    the host iteration as it was; on OpenCL they are refused."""
+    """``momentum``, ``anderson`` and ``spectral`` variants run other curves than the plain ADMM, count their
+    restarts (penalty changes), and leave the host iteration as it was; on OpenCL they are refused."""
     from clsdcam.algorithms.admm.terms import SplittingBase
 
     monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
     monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
     plain = SplittingBase.iterate
     args = ["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--reference-iters", "150",
-            "--variants", "alpha=1.7;alpha=1.7,momentum=0.999;alpha=1.7,anderson=3", "--variant-iters", "60",
+            "--variants", "alpha=1.7;alpha=1.7,momentum=0.999;alpha=1.7,anderson=3;alpha=1.7,spectral=2",
+            "--variant-iters", "60",
             "--replay", "1e9", "--cache", str(tmp_path / "cache"), "--out", str(tmp_path)]
     bench_converged.main(args)
     assert SplittingBase.iterate is plain
     rows = json.loads((tmp_path / "variants.json").read_text())["scenes"][0]["variants"]
     assert rows[0]["restarts"] == 0 and rows[1]["restarts"] > 0 and isinstance(rows[2]["restarts"], int)
+    assert rows[3]["restarts"] > 0
     finals = [r["final"]["psnr"] for r in rows]
-    assert len(set(finals)) == 3
+    assert len(set(finals)) == 4
     assert "| 0 | piecewise, standard | alpha 1.7, anderson 3 |" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         bench_converged.main(args + ["--backend", "opencl"])

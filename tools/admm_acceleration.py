@@ -1,5 +1,5 @@
-"""Two accelerations of ADMM, measured as ``bench_converged --variants`` (names ``momentum`` and ``anderson``) and
-not built into the solver (docs/convergence.md, "What was tried and lost", has their numbers). Both wrap the host
+"""Three accelerations of ADMM, measured as ``bench_converged --variants`` (names ``momentum``, ``anderson`` and
+``spectral``) and not built into the solver (docs/convergence.md, "What was tried and lost", has their numbers). Both wrap the host
 steps' iteration (:class:`~clsdcam.algorithms.admm.host_steps.Splitting`) for the duration of a variant.
 
 ADMM as a fixed-point map. Each split takes the point q = α·K v + (1 − α)·z + y (K the split's operator: H, D_d
@@ -18,6 +18,9 @@ its penalty: ‖q‖² = μ₁‖q_data‖² + μ₂Σ‖q_d‖² + μ₃‖q_no
   T(q_k) − Σ_j γ_j ΔT_j where γ minimises ‖f_k − Σ_j γ_j Δf_j‖ over the last m differences; safeguarded as Zhang
   et al. 2019 accelerate ADMM: an extrapolated point whose residual ‖f‖ does not fall is dropped for the plain step
   from the point before, and the memory cleared.
+* **spectral** = T: spectral adaptive penalties (Xu, Figueiredo and Goldstein 2017), each split's penalty
+  re-estimated every T iterations from the curvatures its steps and duals show (:class:`Spectral`); a change costs
+  the c-step's new divisors and the scaled duals' rescaling (:func:`change_penalties`), no factorisation.
 """
 from __future__ import annotations
 
@@ -25,16 +28,23 @@ from contextlib import contextmanager
 
 import numpy as np
 
-ACCELERATIONS = ("momentum", "anderson")        # the variant names this module reads
+ACCELERATIONS = ("momentum", "anderson", "spectral")        # the variant names this module reads
+CORRELATION = 0.2         # the spectral penalties' safeguard: an estimate whose pair correlates less is not used
 LINEAR_IN_SPLITS = ("x", "w", "s", "eta", "xi", "rho", "hv", "rest")   # the state's arrays after the splits
 
 
-def split_inputs(split, state) -> list[np.ndarray]:
-    """q on the data, TV and non-negativity splits, from the state after the splits."""
+def split_variables(split, state) -> tuple[list, list]:
+    """(z, y) on the data, TV and non-negativity splits, new arrays, from the state after the splits: z = (x,
+    u_d = s_d + η_d, w), y = (ξ on the sensor window and 0 outside it, η_d, ρ)."""
     h, w = split.sensor_shape
-    data = state.x.copy()
-    data[:, :h, :w] += state.xi
-    return [data, state.s + 2 * state.eta, state.w + state.rho]
+    xi = np.zeros_like(state.x)
+    xi[:, :h, :w] = state.xi
+    return [state.x.copy(), state.s + state.eta, state.w.copy()], [xi, state.eta.copy(), state.rho.copy()]
+
+
+def split_inputs(split, state) -> list[np.ndarray]:
+    """q = z + y on the data, TV and non-negativity splits, from the state after the splits."""
+    return [z + y for z, y in zip(*split_variables(split, state))]
 
 
 def set_split_inputs(split, state, q: list[np.ndarray]) -> None:
@@ -128,8 +138,8 @@ class Momentum:
 class Anderson:
     """Anderson-accelerated ADMM (the module docstring), one per solve; ``events`` counts the dropped points."""
 
-    def __init__(self, memory: int, events: dict):
-        self.memory, self.events = memory, events
+    def __init__(self, memory: float, events: dict):
+        self.memory, self.events = int(memory), events
         self.point, self.plain, self.residual = None, None, None
         self.maps, self.residuals = [], []
 
@@ -155,6 +165,91 @@ class Anderson:
         return result
 
 
+def spectral_estimate(step: np.ndarray, dual_step: np.ndarray) -> tuple[float | None, float]:
+    """Xu, Figueiredo and Goldstein's hybrid spectral estimate of a penalty from one pair (a step of an operator's
+    image or of a split, and of the dual it is paired with, monotone): with a = ⟨Δλ,Δλ⟩/⟨Δx,Δλ⟩ (steepest descent)
+    and m = ⟨Δx,Δλ⟩/⟨Δx,Δx⟩ (minimum gradient), m if 2m > a else a − m/2; and the pair's correlation. None where
+    the pair is not monotone."""
+    cross = float(np.vdot(step.ravel(), dual_step.ravel()).real)
+    steps, duals = float(np.vdot(step.ravel(), step.ravel()).real), float(np.vdot(dual_step.ravel(), dual_step.ravel()).real)
+    if cross <= 0 or steps == 0 or duals == 0:
+        return None, 0.0
+    descent, gradient = duals / cross, cross / steps
+    return (gradient if 2 * gradient > descent else descent - gradient / 2), cross / np.sqrt(steps * duals)
+
+
+def spectral_penalty(penalty: float, first: tuple, second: tuple) -> float:
+    """The new penalty from the c-step's estimate ``first`` and the split's ``second`` ((estimate, correlation)
+    each): their geometric mean where both correlate, the one that does, else the penalty as it was."""
+    usable = [estimate for estimate, correlation in (first, second) if estimate is not None and correlation > CORRELATION]
+    return float(np.sqrt(np.prod(usable))) if len(usable) == 2 else (usable[0] if usable else penalty)
+
+
+def split_images(split, state) -> list[np.ndarray]:
+    """K v on each split (Hv, D_d v per TV axis, v), after the c-step."""
+    from clsdcam.algorithms.admm.host_steps import difference
+
+    tv = np.stack([difference(state.v, axis, np.empty_like(state.v)) for axis in split.axes]) if split.axes else None
+    return [state.hv.copy(), tv, state.v.copy()]
+
+
+def change_penalties(split, state, penalties) -> None:
+    """New penalties for the state the splits left: the splits z stay, the scaled duals y scale by μ/μ' (the
+    unscaled duals μy stay), and every derived array follows (:func:`set_split_inputs`)."""
+    old = split.penalties
+    z, y = split_variables(split, state)
+    ratios = (old.data / penalties.data, old.tv / penalties.tv, old.nonneg / penalties.nonneg)
+    split.set_penalties(penalties)
+    set_split_inputs(split, state, [a + b * np.float32(r) for a, b, r in zip(z, y, ratios)])
+
+
+class Spectral:
+    """Spectral adaptive penalties (Xu, Figueiredo and Goldstein 2017, AADMM), one per split: every ``period``
+    iterations, with the intermediate dual λ̂ = μ(q − z_old) (q the split's relaxed point) and λ = μy, the c-step's
+    estimate from (Δ(Kv), −Δλ̂) and the split's from (Δz, Δλ) (:func:`spectral_estimate`; λ's sign is the opposite
+    of theirs), combined by :func:`spectral_penalty`. ``events`` counts the penalty changes. Here the c-step has no
+    term of its own (every term is in a split), so Σ_j K_jᵀλ̂_j = 0 and the c-step's estimates are read split by
+    split."""
+
+    def __init__(self, period: float, events: dict):
+        self.period, self.events = int(period), events
+        self.iteration, self.anchor = 0, None
+
+    def __call__(self, split, plain_iterate, state):
+        """One iteration, its pairs recorded; every ``period`` iterations the penalties estimated and changed."""
+        z_old, y_old = split_variables(split, state)
+        split.c_step(state)
+        images = split_images(split, state)
+        result = split.splits(state, split.relaxation)
+        z, y = split_variables(split, state)
+        p, alpha = split.penalties, split.relaxation
+        mus = (p.data, p.tv, p.nonneg)
+        now = {"image": images, "z": z, "dual": [mu * b for mu, b in zip(mus, y)],
+               "hat": [mu * (alpha * k + (1 - alpha) * a + b - a) for mu, k, a, b in zip(mus, images, z_old, y_old)]}
+        self.iteration += 1
+        if self.anchor is not None and self.iteration % self.period == 0:
+            self.adapt(split, state, now)
+        if self.anchor is None or self.iteration % self.period == 0:
+            self.anchor = now
+        return result
+
+    def adapt(self, split, state, now: dict) -> None:
+        from clsdcam.algorithms.admm.terms import Penalties
+
+        p, a = split.penalties, self.anchor
+        new = []
+        for j, mu in enumerate((p.data, p.tv, p.nonneg)):
+            if now["image"][j] is None:
+                new.append(mu)
+                continue
+            first = spectral_estimate(now["image"][j] - a["image"][j], a["hat"][j] - now["hat"][j])
+            second = spectral_estimate(now["z"][j] - a["z"][j], now["dual"][j] - a["dual"][j])
+            new.append(spectral_penalty(mu, first, second))
+        if new != [p.data, p.tv, p.nonneg]:
+            self.events["restarts"] += 1
+            change_penalties(split, state, Penalties(*new))
+
+
 @contextmanager
 def accelerated(variant: dict):
     """ADMM's host iteration wrapped by the acceleration ``variant`` names (none: as built), restored after; yields
@@ -167,8 +262,8 @@ def accelerated(variant: dict):
     if not named:
         yield events
         return
-    factory = {"momentum": Momentum, "anderson": Anderson}[named[0]]
-    value = int(variant["anderson"]) if factory is Anderson else variant["momentum"]
+    factory = {"momentum": Momentum, "anderson": Anderson, "spectral": Spectral}[named[0]]
+    value = variant[named[0]]
 
     def iterate(split, state):
         if "_acceleration" not in split.__dict__:      # one per solve: each solve builds its own steps

@@ -31,8 +31,9 @@ cached reference runs.
 TV, NONNEG and RELAXATION, by the names data, tv, nonneg and alpha): each variant runs ``--variant-iters`` at the
 scene's weight, scored every 10 iterations, and the table gives the mark from which it stays within the rules and
 where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``variants.json``). The names
-``momentum`` (restart factor η) and ``anderson`` (memory m) run one of :mod:`admm_acceleration`'s accelerations
-(host steps; "restarts" counts its restarts or dropped points).
+``momentum`` (restart factor η), ``anderson`` (memory m) and ``spectral`` (period T) run one of
+:mod:`admm_acceleration`'s accelerations (host steps; "restarts" counts its restarts, dropped points or penalty
+changes).
 """
 from __future__ import annotations
 
@@ -373,7 +374,7 @@ def main(argv=None) -> int:
                         help="tolerances at which to replay the stop on the reference runs (the table's last part)")
     parser.add_argument("--variants", default="", metavar="NAME=V[,…][;…]",
                         help="measure ADMM's constants or accelerations instead (names: data, tv, nonneg, alpha, "
-                             "momentum, anderson; the docstring)")
+                             "momentum, anderson, spectral; the docstring)")
     parser.add_argument("--variant-iters", type=int, default=500, help="each variant's iterations (default 500)")
     add_backend_option(parser)
     args = parser.parse_args(argv)
@@ -382,7 +383,7 @@ def main(argv=None) -> int:
     except ValueError as error:
         parser.error(str(error))
     if args.backend != "numpy" and any(set(v) & set(ACCELERATIONS) for v in args.variants):
-        parser.error("--variants momentum/anderson wrap the host steps: --backend numpy")
+        parser.error("--variants momentum/anderson/spectral wrap the host steps: --backend numpy")
     Where.use(args.backend)
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
     chosen = chosen_scenes(parser, args, seed)
