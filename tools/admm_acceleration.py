@@ -205,11 +205,13 @@ def change_penalties(split, state, penalties) -> None:
 
 class Spectral:
     """Spectral adaptive penalties (Xu, Figueiredo and Goldstein 2017, AADMM), one per split: every ``period``
-    iterations, with the intermediate dual λ̂ = μ(q − z_old) (q the split's relaxed point) and λ = μy, the c-step's
-    estimate from (Δ(Kv), −Δλ̂) and the split's from (Δz, Δλ) (:func:`spectral_estimate`; λ's sign is the opposite
-    of theirs), combined by :func:`spectral_penalty`. ``events`` counts the penalty changes. Here the c-step has no
-    term of its own (every term is in a split), so Σ_j K_jᵀλ̂_j = 0 and the c-step's estimates are read split by
-    split."""
+    iterations, with the intermediate dual λ̂ = μ(y_old + Kv − z_old) (unrelaxed: the c-step's optimality is
+    Σ_j K_jᵀλ̂_j = 0 whatever α, as in Xu et al.'s relaxed AADMM) and λ = μy, the c-step's estimate from
+    (Δ(Kv), −Δλ̂) and the split's from (Δz, Δλ) (:func:`spectral_estimate`; λ's sign is the opposite of theirs),
+    combined by :func:`spectral_penalty`. ``events`` counts the penalty changes. Here the c-step has no term of its
+    own (every term is in a split), so the c-step's estimates can only be read split by split, and since
+    Σ_j K_jᵀλ̂_j = 0 their cross terms sum to zero: at least one split's is never monotone, and those that pass read
+    the splits' coupling rather than a term's curvature."""
 
     def __init__(self, period: float, events: dict):
         self.period, self.events = int(period), events
@@ -222,10 +224,10 @@ class Spectral:
         images = split_images(split, state)
         result = split.splits(state, split.relaxation)
         z, y = split_variables(split, state)
-        p, alpha = split.penalties, split.relaxation
+        p = split.penalties
         mus = (p.data, p.tv, p.nonneg)
         now = {"image": images, "z": z, "dual": [mu * b for mu, b in zip(mus, y)],
-               "hat": [mu * (alpha * k + (1 - alpha) * a + b - a) for mu, k, a, b in zip(mus, images, z_old, y_old)]}
+               "hat": [mu * (b + k - a) for mu, k, a, b in zip(mus, images, z_old, y_old)]}
         self.iteration += 1
         if self.anchor is not None and self.iteration % self.period == 0:
             self.adapt(split, state, now)
