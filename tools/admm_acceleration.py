@@ -1,6 +1,7 @@
 """Three accelerations of ADMM, measured as ``bench_converged --variants`` (names ``momentum``, ``anderson`` and
-``spectral``) and not built into the solver (docs/convergence.md, "What was tried and lost", has their numbers). Both wrap the host
-steps' iteration (:class:`~clsdcam.algorithms.admm.host_steps.Splitting`) for the duration of a variant.
+``spectral``) and not built into the solver (docs/convergence.md, "What was tried and lost", has their numbers).
+Each wraps the host steps' iteration (:class:`~clsdcam.algorithms.admm.host_steps.Splitting`) for the duration of a
+variant. Inner products are accumulated in float64 (:func:`inner`).
 
 ADMM as a fixed-point map. Each split takes the point q = α·K v + (1 − α)·z + y (K the split's operator: H, D_d
 or I; z its variable, y its scaled dual), sets z = prox(q) and y = q − z, and the next c-step reads z − y. So q, on
@@ -28,7 +29,6 @@ from contextlib import contextmanager
 
 import numpy as np
 
-ACCELERATIONS = ("momentum", "anderson", "spectral")        # the variant names this module reads
 CORRELATION = 0.2         # the spectral penalties' safeguard: an estimate whose pair correlates less is not used
 LINEAR_IN_SPLITS = ("x", "w", "s", "eta", "xi", "rho", "hv", "rest")   # the state's arrays after the splits
 
@@ -68,11 +68,15 @@ def set_split_inputs(split, state, q: list[np.ndarray]) -> None:
     np.multiply(split.penalties.nonneg, state.w - state.rho, out=state.rest)
 
 
+def inner(a: np.ndarray, b: np.ndarray) -> float:
+    """⟨a, b⟩ of two real arrays, accumulated in float64."""
+    return float(np.dot(a.ravel().astype(np.float64), b.ravel().astype(np.float64)))
+
+
 def weighted_dot(split, a: list, b: list) -> float:
     """Σ_j μ_j⟨a_j, b_j⟩ over the three splits."""
     p = split.penalties
-    return sum(mu * float(np.vdot(x.ravel(), y.ravel()).real)
-               for mu, x, y in zip((p.data, p.tv, p.nonneg), a, b))
+    return sum(mu * inner(x, y) for mu, x, y in zip((p.data, p.tv, p.nonneg), a, b))
 
 
 def anderson_point(g: list, f: list, dot) -> list:
@@ -105,9 +109,9 @@ class Momentum:
         next extrapolated point or the restart (``plain_iterate`` is not used: the residual needs the splits' inputs
         in between)."""
         split.c_step(state)
-        hat = {n: getattr(state, n).copy() for n in ("x", "w", "s", "eta", "xi", "rho")}
+        hat = split_variables(split, state)          # (ẑ, ŷ): the c-step leaves the splits and duals alone
         result = split.splits(state, split.relaxation)
-        residual = self.combined_residual(split, state, hat)
+        residual = self.combined_residual(split, split_variables(split, state), hat)
         current = {n: getattr(state, n).copy() for n in LINEAR_IN_SPLITS}
         if self.previous is not None and residual >= self.eta * self.residual:
             for n in LINEAR_IN_SPLITS:
@@ -126,13 +130,11 @@ class Momentum:
         return result
 
     @staticmethod
-    def combined_residual(split, state, hat: dict) -> float:
-        """Σ μ(‖y − ŷ‖² + ‖z − ẑ‖²), with u_d = s_d + η_d."""
-        now = [state.x, state.xi, state.s + state.eta, state.eta, state.w, state.rho]
-        before = [hat["x"], hat["xi"], hat["s"] + hat["eta"], hat["eta"], hat["w"], hat["rho"]]
-        p = split.penalties
-        weights = (p.data, p.data, p.tv, p.tv, p.nonneg, p.nonneg)
-        return sum(mu * float(np.sum((a - b).astype(np.float64) ** 2)) for mu, a, b in zip(weights, now, before))
+    def combined_residual(split, now: tuple, hat: tuple) -> float:
+        """Σ μ(‖z − ẑ‖² + ‖y − ŷ‖²) from the (z, y) of :func:`split_variables` after the splits and before them."""
+        (z, y), (z_hat, y_hat) = now, hat
+        dz, dy = [a - b for a, b in zip(z, z_hat)], [a - b for a, b in zip(y, y_hat)]
+        return weighted_dot(split, dz, dz) + weighted_dot(split, dy, dy)
 
 
 class Anderson:
@@ -170,8 +172,7 @@ def spectral_estimate(step: np.ndarray, dual_step: np.ndarray) -> tuple[float | 
     image or of a split, and of the dual it is paired with, monotone): with a = ⟨Δλ,Δλ⟩/⟨Δx,Δλ⟩ (steepest descent)
     and m = ⟨Δx,Δλ⟩/⟨Δx,Δx⟩ (minimum gradient), m if 2m > a else a − m/2; and the pair's correlation. None where
     the pair is not monotone."""
-    cross = float(np.vdot(step.ravel(), dual_step.ravel()).real)
-    steps, duals = float(np.vdot(step.ravel(), step.ravel()).real), float(np.vdot(dual_step.ravel(), dual_step.ravel()).real)
+    cross, steps, duals = inner(step, dual_step), inner(step, step), inner(dual_step, dual_step)
     if cross <= 0 or steps == 0 or duals == 0:
         return None, 0.0
     descent, gradient = duals / cross, cross / steps
@@ -181,7 +182,8 @@ def spectral_estimate(step: np.ndarray, dual_step: np.ndarray) -> tuple[float | 
 def spectral_penalty(penalty: float, first: tuple, second: tuple) -> float:
     """The new penalty from the c-step's estimate ``first`` and the split's ``second`` ((estimate, correlation)
     each): their geometric mean where both correlate, the one that does, else the penalty as it was."""
-    usable = [estimate for estimate, correlation in (first, second) if estimate is not None and correlation > CORRELATION]
+    usable = [estimate for estimate, correlation in (first, second)
+              if estimate is not None and correlation > CORRELATION]
     return float(np.sqrt(np.prod(usable))) if len(usable) == 2 else (usable[0] if usable else penalty)
 
 
@@ -264,8 +266,7 @@ def accelerated(variant: dict):
     if not named:
         yield events
         return
-    factory = {"momentum": Momentum, "anderson": Anderson, "spectral": Spectral}[named[0]]
-    value = variant[named[0]]
+    factory, value = ACCELERATIONS[named[0]], variant[named[0]]
 
     def iterate(split, state):
         if "_acceleration" not in split.__dict__:      # one per solve: each solve builds its own steps
@@ -277,3 +278,6 @@ def accelerated(variant: dict):
         yield events
     finally:
         SplittingBase.iterate = plain
+
+
+ACCELERATIONS = {"momentum": Momentum, "anderson": Anderson, "spectral": Spectral}   # the variant names it reads

@@ -216,7 +216,8 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
 def variant_rows(results: dict) -> list[str]:
     tolerances = results["replay"]
     rows = ["| # | kind | variant | stays within from | restarts | "
-            + " | ".join(f"stop at {t:g}" for t in tolerances) + " |", "|---:|---|---|---|---:|" + "---|" * len(tolerances)]
+            + " | ".join(f"stop at {t:g}" for t in tolerances) + " |",
+            "|---:|---|---|---|---:|" + "---|" * len(tolerances)]
     for s in results["scenes"]:
         for v in s["variants"]:
             name = ", ".join(f"{k} {x:g}" for k, x in v["variant"].items()) or "as built"
