@@ -358,6 +358,25 @@ def test_bench_converged_measures_the_accelerations_and_restores_the_iteration(t
     assert "wrap the host steps" in capsys.readouterr().err
 
 
+def test_bench_converged_measures_starts_from_fista_and_from_the_answer(tmp_path, capsys, monkeypatch):
+    """``fista_start`` and ``answer_start`` run ADMM from their cubes (other curves than the zero start's) and count
+    what the start took; the answer's start, as many ADMM iterations as the reference, ends nearer the reference's
+    PSNR than the zero start does in as few iterations."""
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
+    bench_converged.main(["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--reference-iters",
+                          "150", "--variants", "alpha=1.7;alpha=1.7,fista_start=20;alpha=1.7,answer_start=150",
+                          "--variant-iters", "20", "--replay", "1e9", "--cache", str(tmp_path / "cache"),
+                          "--out", str(tmp_path)])
+    scene = json.loads((tmp_path / "variants.json").read_text())["scenes"][0]
+    zero, fista, answer = scene["variants"]
+    assert zero["start_iterations"] == 0 and fista["start_iterations"] > 0 and answer["start_iterations"] > 0
+    assert len({v["final"]["psnr"] for v in scene["variants"]}) == 3
+    target = scene["reference"]["psnr"]
+    assert abs(answer["final"]["psnr"] - target) < abs(zero["final"]["psnr"] - target)
+    assert "| 0 | piecewise, standard | alpha 1.7, answer_start 150 |" in capsys.readouterr().out
+
+
 def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys, monkeypatch):
     """The traced run of as many iterations as the reference is the reference: its last cube is at distance 0; at a
     huge tolerance the steps' estimate fires after four windows (three ratios) and the net one a window later (its

@@ -33,7 +33,9 @@ scene's weight, scored every 10 iterations, and the table gives the mark from wh
 where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``variants.json``). The names
 ``momentum`` (restart factor η), ``anderson`` (memory m) and ``spectral`` (period T) run one of
 :mod:`admm_acceleration`'s accelerations (host steps; "restarts" counts its restarts, dropped points or penalty
-changes).
+changes). ``fista_start=N`` starts ADMM (duals zero) from N FISTA iterations' field, ``answer_start=N`` from N ADMM
+iterations' (the model's own answer: the bound on any start of the primal alone, a coarse-to-fine one included);
+"start" is what making it took, in the variant's own iterations' time.
 """
 from __future__ import annotations
 
@@ -67,11 +69,11 @@ def reference_marks(iters: int) -> list[int]:
     return sorted({int(round(m)) for m in np.geomspace(10, iters, 24)})
 
 
-def timed_solve(sim, fields: dict, marks=()) -> tuple:
-    """(result, seconds) of one solve on :attr:`Where.backend`, snapshots at ``marks``."""
+def timed_solve(sim, fields: dict, marks=(), x0=None) -> tuple:
+    """(result, seconds) of one solve on :attr:`Where.backend`, snapshots at ``marks``, from ``x0`` if given."""
     solver = Solver(sim.calibration, backend=Where.backend, settings=Settings(**fields))
     start = time.perf_counter()
-    result = solver.solve(sim.measurement, snapshots=marks)
+    result = solver.solve(sim.measurement, x0=x0, snapshots=marks)
     return result, time.perf_counter() - start
 
 
@@ -165,7 +167,8 @@ def settled_within(points: list[dict], ref: dict) -> int | None:
 
 
 ADMM_CONSTANTS = {"data": "DATA", "tv": "TV", "nonneg": "NONNEG", "alpha": "RELAXATION"}
-VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS)      # the constants, and the accelerations (admm_acceleration)
+STARTS = {"fista_start": "fista", "answer_start": "admm"}   # a start's name -> the algorithm that makes its cube
+VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS, *STARTS)  # the constants, the accelerations, the starts
 
 
 def parse_variants(text: str) -> list[dict]:
@@ -195,6 +198,18 @@ def admm_constants(variant: dict):
             setattr(algorithm, name, value)
 
 
+def variant_start(sim, tau: float, variant: dict) -> tuple:
+    """(x0, seconds): the whole field ADMM starts from (its duals zero) and what making it took; (None, 0) for the
+    zero start. ``fista_start=N``: N FISTA iterations at the scene's weight; ``answer_start=N``: N ADMM iterations,
+    the model's own answer (what no start can better: the bound on any start of the primal alone)."""
+    named = [name for name in STARTS if name in variant]
+    if not named:
+        return None, 0.0
+    iters = int(variant[named[0]])
+    result, seconds = timed_solve(sim, {"tv": tau, "iters": iters, "algorithm": STARTS[named[0]], "full_field": True})
+    return result.full_field, seconds
+
+
 def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
     """One scene's ADMM variants at its weight (today's or the default's ``--tv auto`` choice) against its reference."""
     sim = panel_scene(plan, shape, bands)
@@ -203,26 +218,29 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
     rows = []
     for variant in args.variants:
         with admm_constants(variant), accelerated(variant) as events:
+            x0, start_seconds = variant_start(sim, tau, variant)
             result, seconds = timed_solve(sim, {"tv": tau, "iters": args.variant_iters, "algorithm": "admm"},
-                                          range(10, args.variant_iters + 1, 10))
+                                          range(10, args.variant_iters + 1, 10), x0)
         run = {"points": curve(sim, result), "change": [r["change"] for r in result.history]}
         rows.append({"variant": variant, "within": settled_within(run["points"], ref),
                      "stops": [replay_stop(run, t) for t in args.tolerances],
                      "ms_per_iteration": 1e3 * seconds / args.variant_iters, "restarts": events["restarts"],
+                     "start_iterations": start_seconds / seconds * args.variant_iters,
                      "final": run["points"][-1]})
     return {**plan, "tv": tau, "reference": ref, "variants": rows}
 
 
 def variant_rows(results: dict) -> list[str]:
     tolerances = results["replay"]
-    rows = ["| # | kind | variant | stays within from | restarts | "
+    rows = ["| # | kind | variant | start, in its iterations' time | stays within from | restarts | "
             + " | ".join(f"stop at {t:g}" for t in tolerances) + " |",
-            "|---:|---|---|---|---:|" + "---|" * len(tolerances)]
+            "|---:|---|---|---:|---|---:|" + "---|" * len(tolerances)]
     for s in results["scenes"]:
         for v in s["variants"]:
             name = ", ".join(f"{k} {x:g}" for k, x in v["variant"].items()) or "as built"
             cells = [stop_cell(stop, s["reference"]) for stop in v["stops"]]
-            rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {name} | {v['within'] or '–'} | "
+            rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {name} | {v['start_iterations']:.0f} | "
+                        f"{v['within'] or '–'} | "
                         f"{v['restarts']} | " + " | ".join(cells) + " |")
     return rows
 
