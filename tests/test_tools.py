@@ -227,18 +227,25 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
     assert (tmp_path / "b" / "converged.png").stat().st_size > 0
 
 
-def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_path, capsys, monkeypatch):
+ONE_PIECEWISE_SCENE = ["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--reference-iters", "150"]
+
+
+@pytest.fixture
+def piecewise_panel(monkeypatch):
+    """bench_converged's panel drawn from the piecewise kind alone (no real cube needed)."""
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
+
+
+def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_path, capsys, piecewise_panel):
     """``--variants``: each variant runs with its constants (α = 1 and 1.7 give other curves), the settled mark is
     the first from which every mark is within, a huge tolerance stops where the estimate first exists, and the
     module's constants are as before afterwards."""
     from clsdcam.algorithms.admm import algorithm
 
-    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
-    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
     before = {name: getattr(algorithm, name) for name in bench_converged.ADMM_CONSTANTS.values()}
-    bench_converged.main(["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--reference-iters",
-                          "150", "--variants", "alpha=1;alpha=1.7,tv=0.003", "--variant-iters", "160",
-                          "--replay", "1e9", "--cache", str(tmp_path / "cache"), "--out", str(tmp_path)])
+    bench_converged.main([*ONE_PIECEWISE_SCENE, "--variants", "alpha=1;alpha=1.7,tv=0.003", "--variant-iters",
+                          "160", "--replay", "1e9", "--cache", str(tmp_path / "cache"), "--out", str(tmp_path)])
     assert {name: getattr(algorithm, name) for name in before} == before
     scene = json.loads((tmp_path / "variants.json").read_text())["scenes"][0]
     plain, relaxed = scene["variants"]
@@ -333,18 +340,15 @@ def test_a_penalty_change_keeps_the_splits_and_the_unscaled_duals(monkeypatch):
     assert checked == [True] * 6
 
 
-def test_bench_converged_measures_the_accelerations_and_restores_the_iteration(tmp_path, capsys, monkeypatch):
+def test_bench_converged_measures_the_accelerations_and_restores_the_iteration(tmp_path, capsys, piecewise_panel):
     """``momentum``, ``anderson`` and ``spectral`` variants run other curves than the plain ADMM, count their
     restarts (penalty changes), and leave the host iteration as it was; on OpenCL they are refused."""
     from clsdcam.algorithms.admm.terms import SplittingBase
 
-    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
-    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
     plain = SplittingBase.iterate
-    args = ["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--reference-iters", "150",
+    args = [*ONE_PIECEWISE_SCENE,
             "--variants", "alpha=1.7;alpha=1.7,momentum=0.999;alpha=1.7,anderson=3;alpha=1.7,spectral=2",
-            "--variant-iters", "60",
-            "--replay", "1e9", "--cache", str(tmp_path / "cache"), "--out", str(tmp_path)]
+            "--variant-iters", "60", "--replay", "1e9", "--cache", str(tmp_path / "cache"), "--out", str(tmp_path)]
     bench_converged.main(args)
     assert SplittingBase.iterate is plain
     rows = json.loads((tmp_path / "variants.json").read_text())["scenes"][0]["variants"]
@@ -358,14 +362,12 @@ def test_bench_converged_measures_the_accelerations_and_restores_the_iteration(t
     assert "wrap the host steps" in capsys.readouterr().err
 
 
-def test_bench_converged_measures_starts_from_fista_and_from_the_answer(tmp_path, capsys, monkeypatch):
+def test_bench_converged_measures_starts_from_fista_and_from_the_answer(tmp_path, capsys, piecewise_panel):
     """``fista_start`` and ``answer_start`` run ADMM from their cubes (other curves than the zero start's) and count
     what the start took; the answer's start, as many ADMM iterations as the reference, ends nearer the reference's
     PSNR than the zero start does in as few iterations."""
-    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
-    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
-    bench_converged.main(["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--reference-iters",
-                          "150", "--variants", "alpha=1.7;alpha=1.7,fista_start=20;alpha=1.7,answer_start=150",
+    bench_converged.main([*ONE_PIECEWISE_SCENE,
+                          "--variants", "alpha=1.7;alpha=1.7,fista_start=20;alpha=1.7,answer_start=150",
                           "--variant-iters", "20", "--replay", "1e9", "--cache", str(tmp_path / "cache"),
                           "--out", str(tmp_path)])
     scene = json.loads((tmp_path / "variants.json").read_text())["scenes"][0]
@@ -377,14 +379,11 @@ def test_bench_converged_measures_starts_from_fista_and_from_the_answer(tmp_path
     assert "| 0 | piecewise, standard | alpha 1.7, answer_start 150 |" in capsys.readouterr().out
 
 
-def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys, monkeypatch):
+def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys, piecewise_panel):
     """The traced run of as many iterations as the reference is the reference: its last cube is at distance 0; at a
     huge tolerance the steps' estimate fires after four windows (three ratios) and the net one a window later (its
     first window starts at iteration 25); a stop's distance is its mark's; "stays within" reads every later mark."""
-    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
-    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
-    bench_stop.main(["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--iters", "150",
-                     "--reference-iters", "150", "--tolerances", "1e9", "--cache", str(tmp_path / "cache"),
+    bench_stop.main([*ONE_PIECEWISE_SCENE, "--iters", "150", "--tolerances", "1e9", "--cache", str(tmp_path / "cache"),
                      "--out", str(tmp_path)])
     scene = json.loads((tmp_path / "stop.json").read_text())["scenes"][0]
     marks = scene["marks"]

@@ -201,7 +201,8 @@ def admm_constants(variant: dict):
 def variant_start(sim, tau: float, variant: dict) -> tuple:
     """(x0, seconds): the whole field ADMM starts from (its duals zero) and what making it took; (None, 0) for the
     zero start. ``fista_start=N``: N FISTA iterations at the scene's weight; ``answer_start=N``: N ADMM iterations,
-    the model's own answer (what no start can better: the bound on any start of the primal alone)."""
+    the model's own answer (what no start can better: the bound on any start of the primal alone). Made by the
+    solver as built, whatever constants or acceleration the variant names."""
     named = [name for name in STARTS if name in variant]
     if not named:
         return None, 0.0
@@ -217,8 +218,8 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
     ref = reference({a: reference_run(sim, plan, tau, a, args.reference_iters, cache) for a in REFERENCE_ALGORITHMS})
     rows = []
     for variant in args.variants:
+        x0, start_seconds = variant_start(sim, tau, variant)
         with admm_constants(variant), accelerated(variant) as events:
-            x0, start_seconds = variant_start(sim, tau, variant)
             result, seconds = timed_solve(sim, {"tv": tau, "iters": args.variant_iters, "algorithm": "admm"},
                                           range(10, args.variant_iters + 1, 10), x0)
         run = {"points": curve(sim, result), "change": [r["change"] for r in result.history]}
@@ -240,8 +241,7 @@ def variant_rows(results: dict) -> list[str]:
             name = ", ".join(f"{k} {x:g}" for k, x in v["variant"].items()) or "as built"
             cells = [stop_cell(stop, s["reference"]) for stop in v["stops"]]
             rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {name} | {v['start_iterations']:.0f} | "
-                        f"{v['within'] or '–'} | "
-                        f"{v['restarts']} | " + " | ".join(cells) + " |")
+                        f"{v['within'] or '–'} | {v['restarts']} | " + " | ".join(cells) + " |")
     return rows
 
 
@@ -392,8 +392,8 @@ def main(argv=None) -> int:
     parser.add_argument("--replay", default="0.1,0.05,0.03",
                         help="tolerances at which to replay the stop on the reference runs (the table's last part)")
     parser.add_argument("--variants", default="", metavar="NAME=V[,…][;…]",
-                        help="measure ADMM's constants or accelerations instead (names: data, tv, nonneg, alpha, "
-                             "momentum, anderson, spectral; the docstring)")
+                        help="measure ADMM's constants, accelerations or starts instead (names: "
+                             f"{', '.join(VARIANT_NAMES)}; the docstring)")
     parser.add_argument("--variant-iters", type=int, default=500, help="each variant's iterations (default 500)")
     add_backend_option(parser)
     args = parser.parse_args(argv)
