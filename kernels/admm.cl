@@ -100,18 +100,20 @@ __kernel void admm_u_step(__global REAL *eta, __global REAL *s, __global const R
     }
 }
 
-/* admm_tv_adjoint: rest += μ₂·Σ_d D_dᵀ s_d over the active axes (bit d of mask), with (D_dᵀu)_i = u_{i−1} − u_i
- * (along λ u_{−1} = 0 and u_{K−1} unused; circular along y and x), each axis's two terms added in NumPy's order.
- * Grid (x, y, k) over (Wp, Hp, K), x and y rounded up (bounds-checked). */
-__kernel void admm_tv_adjoint(__global REAL *rest, __global const REAL *s, int K, int Hp, int Wp, int mask, REAL mu)
+/* admm_tv_adjoint: rest += Σ_d μ₂,d·D_dᵀ s_d over the active axes (bit d of mask; μ₂,d = mu_d, the axis's TV
+ * penalty), with (D_dᵀu)_i = u_{i−1} − u_i (along λ u_{−1} = 0 and u_{K−1} unused; circular along y and x), each
+ * axis's two terms added in NumPy's order. Grid (x, y, k) over (Wp, Hp, K), x and y rounded up (bounds-checked). */
+__kernel void admm_tv_adjoint(__global REAL *rest, __global const REAL *s, int K, int Hp, int Wp, int mask,
+                              REAL mu0, REAL mu1, REAL mu2)
 {
     int x = get_global_id(0), y = get_global_id(1), k = get_global_id(2);
     if (x >= Wp || y >= Hp) return;
     size_t cube = (size_t)K * Hp * Wp, i = at3(k, y, x, Hp, Wp);
     __global const REAL *u = s;
-    REAL r = rest[i];
+    REAL r = rest[i], penalties[3] = {mu0, mu1, mu2};
     for (int axis = 0; axis < 3; ++axis) {
         if (!((mask >> axis) & 1)) continue;
+        REAL mu = penalties[axis];
         if (axis == 0) {
             if (k + 1 < K) r -= mu * u[i];
             if (k > 0) r += mu * u[at3(k - 1, y, x, Hp, Wp)];
@@ -124,6 +126,25 @@ __kernel void admm_tv_adjoint(__global REAL *rest, __global const REAL *s, int K
         u += cube;
     }
     rest[i] = r;
+}
+
+/* admm_rescale_tv_duals: the TV split's scaled duals for new penalties, the unscaled μ₂,d·η_d kept: over the
+ * active axes' slabs of η and s (one slab per active axis, in axis order), with r_d = μ₂,d(old)/μ₂,d(new),
+ *   s_d ← s_d + (1 − r_d)·η_d,   η_d ← r_d·η_d   (u_d = s_d + η_d unchanged).
+ * Grid over the cube's n elements. */
+__kernel void admm_rescale_tv_duals(__global REAL *eta, __global REAL *s, long n, int mask, REAL r0, REAL r1,
+                                    REAL r2)
+{
+    size_t i = get_global_id(0);
+    if (i >= (size_t)n) return;
+    REAL ratios[3] = {r0, r1, r2};
+    for (int axis = 0; axis < 3; ++axis) {
+        if (!((mask >> axis) & 1)) continue;
+        REAL r = ratios[axis], e = eta[i];
+        s[i] += ((REAL)1 - r) * e;
+        eta[i] = r * e;
+        i += (size_t)n;
+    }
 }
 
 /* admm_rhs: X_i ← X_i·T_{i mod plane} + R_i on complex spectra (K, plane), T = μ₁conj(Ĥ) (plane): the c-step's

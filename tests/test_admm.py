@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from clsdcam.algorithms import admm
+from clsdcam.algorithms.admm import balance
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr
@@ -218,6 +219,54 @@ def test_a_videos_next_frame_resumes_the_splits_and_duals(leds):
     assert resumed.attrs["tv_chosen"] == first.attrs["tv_chosen"] and "noise_estimate" not in resumed.attrs
     again = solver.solve(leds.measurement, state=state, iters=3)
     assert state.carry is None and again.history[0]["data"] > 1.2 * first.history[-1]["data"]
+
+
+def test_the_balance_sets_each_axis_threshold_from_the_iterates_differences_and_keeps_the_unscaled_duals(tiny):
+    """After the balance, each axis's soft threshold τw_d/μ₂,d is C times the RMS of D_d w (its β_d within the
+    range), the splits u_d = s_d + η_d and the unscaled duals μ₂,d·η_d are as before, and the state records the
+    penalties its duals are in; the divisors are the new penalties'."""
+    model, split = tiny
+    state = random_state(split)
+    state.w *= 0.02                    # differences whose threshold the range does not hold
+    old = split.penalties
+    u, unscaled = state.s + state.eta, [old.tv_along(a) * state.eta[i] for i, a in enumerate(split.axes)]
+    new = balance.balance(split, state, state.w)
+    for i, axis in enumerate(split.axes):
+        rms = np.sqrt(np.mean(difference(state.w, axis, np.empty_like(state.w)) ** 2))
+        assert split.threshold(axis) == pytest.approx(balance.THRESHOLD_OVER_RMS * rms, rel=1e-12)
+        assert np.allclose(new.tv_along(axis) * state.eta[i], unscaled[i], rtol=1e-12, atol=1e-15)
+    assert len(set(new.tv_balance)) == 3 and all(b != 1.0 for b in new.tv_balance)
+    assert np.allclose(state.s + state.eta, u, rtol=1e-12, atol=1e-15)
+    assert state.penalties is new and split.penalties is new
+    assert split._inverse is split.terms.for_penalties(new, split.axes)[2]
+
+
+def test_the_balance_holds_each_axis_within_its_range_and_leaves_a_flat_axis(tiny):
+    """A cube flat along λ keeps β_λ; the other axes' β_d are held within [1/BALANCE_RANGE, BALANCE_RANGE]."""
+    model, split = tiny
+    w = np.broadcast_to(RNG.random(split.shape[1:]), split.shape).copy()
+    betas = balance.balanced_penalties(split, balance.difference_rms(split, w)).tv_balance
+    assert betas[0] == 1.0
+    tiny_rms = balance.balanced_penalties(split, {1: 1e-12, 2: 1e12}).tv_balance
+    assert tiny_rms[1:] == (balance.BALANCE_RANGE, 1.0 / balance.BALANCE_RANGE)
+
+
+def test_admm_balances_once_at_its_mark_and_a_resumed_frame_keeps_the_penalties(leds, monkeypatch):
+    """A solve past BALANCE_AT iterations balances once, at that mark (the record of every later iteration is
+    after it); a solve that ends before it keeps the camera's penalties; the next frame resumes with the balanced
+    penalties and does not balance again."""
+    calls = []
+    real = balance.balance
+    monkeypatch.setattr(balance, "balance", lambda *a: calls.append(a) or real(*a))
+    solver = Solver(leds.calibration, settings=Settings(iters=admm.algorithm.BALANCE_AT, algorithm="admm"))
+    short = solver.solve(leds.measurement)
+    assert not calls and short.state.carry[0].penalties.tv_balance is None
+    solver = Solver(leds.calibration, settings=Settings(iters=admm.algorithm.BALANCE_AT + 5, algorithm="admm"))
+    first = solver.solve(leds.measurement)
+    carried = first.state.carry[0].penalties
+    assert len(calls) == 1 and carried.tv_balance is not None
+    resumed = solver.solve(leds.measurement, state=first.state, iters=admm.algorithm.BALANCE_AT + 5)
+    assert len(calls) == 1 and resumed.state.carry[0].penalties is carried
 
 
 def test_a_solver_builds_the_calibrations_terms_once_and_a_fresh_solver_gives_the_same_cube(leds):

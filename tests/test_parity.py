@@ -397,7 +397,7 @@ def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"]):
         if tv_weights is not None:
             priors.append(TotalVariation(be, 0.05, Settings(tv_weights=tv_weights)))
         split = band_steps(Problem(model, be.to_device(b), None, None, model.n_bands, priors=priors, filters=filters))
-        split.set_penalties(Penalties(data=0.3, tv=0.7, nonneg=1.3))
+        split.set_penalties(Penalties(data=0.3, tv=0.7, nonneg=1.3, tv_balance=(0.6, 1.7, 1.2)))
         pair.append(split)
     return pair
 
@@ -440,9 +440,9 @@ def flat_numbers(numbers) -> np.ndarray:
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_admm_splits_tv_adjoint_and_division_match_numpy(dtype, axes, path):
     """From the same random state: the splits (x-, w- and u-steps with their duals and sums, over-relaxed), the TV
-    adjoint and the Fourier division (DCT along λ, divisors, Ĥ·v̂) agree with NumPy's to the elementwise rule
-    (float64: 1e-12), with TV on every axis, on some (the kernels skip the others), or none (zero-size split
-    arrays)."""
+    adjoint and the Fourier division (DCT along λ, divisors, Ĥ·v̂), and the TV duals' rescaling for new penalties,
+    agree with NumPy's to the elementwise rule (float64: 1e-12), with TV on every axis, on some (the kernels skip the
+    others), or none (zero-size split arrays); each axis with its own TV penalty."""
     backend = opencl(dtype, PATH_BACKEND[path])
     pair = admm_pair(dtype, backend, TV_AXES[axes])
     assert [len(split.axes) for split in pair] == [3 - TV_AXES[axes].count(0.0) if TV_AXES[axes] else 0] * 2
@@ -454,6 +454,9 @@ def test_admm_splits_tv_adjoint_and_division_match_numpy(dtype, axes, path):
     for split, state in zip(pair, (ref, got)):
         split._add_tv_adjoint(state)
         split._divide(*state.spectra)
+    assert_states_match(ref, got, backend, tolerance)
+    for split, state in zip(pair, (ref, got)):
+        split.rescale_tv_duals(state, {0: 0.3, 1: 2.5, 2: 1.1})
     assert_states_match(ref, got, backend, tolerance)
 
 

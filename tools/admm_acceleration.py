@@ -26,6 +26,7 @@ its penalty: ‖q‖² = μ₁‖q_data‖² + μ₂Σ‖q_d‖² + μ₃‖q_no
 from __future__ import annotations
 
 from contextlib import contextmanager
+from dataclasses import replace
 
 import numpy as np
 
@@ -73,10 +74,18 @@ def inner(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.dot(a.ravel().astype(np.float64), b.ravel().astype(np.float64)))
 
 
-def weighted_dot(split, a: list, b: list) -> float:
-    """Σ_j μ_j⟨a_j, b_j⟩ over the three splits."""
+def split_penalties(split) -> list:
+    """Each split's penalty, broadcast against its variables: μ₁, μ₂,d (one per active TV axis, shaped to the
+    stacked η_d), μ₃."""
     p = split.penalties
-    return sum(mu * inner(x, y) for mu, x, y in zip((p.data, p.tv, p.nonneg), a, b))
+    return [p.data, np.array([p.tv_along(axis) for axis in split.axes]).reshape(-1, 1, 1, 1), p.nonneg]
+
+
+def weighted_dot(split, a: list, b: list) -> float:
+    """Σ_j μ_j⟨a_j, b_j⟩ over the three splits (the TV split's axis by axis)."""
+    data, tv, nonneg = split_penalties(split)
+    return (data * inner(a[0], b[0]) + sum(float(mu) * inner(x, y) for mu, x, y in zip(tv.ravel(), a[1], b[1]))
+            + nonneg * inner(a[2], b[2]))
 
 
 def anderson_point(g: list, f: list, dot) -> list:
@@ -198,11 +207,12 @@ def split_images(split, state) -> list[np.ndarray]:
 def change_penalties(split, state, penalties) -> None:
     """New penalties for the state the splits left: the splits z stay, the scaled duals y scale by μ/μ' (the
     unscaled duals μy stay), and every derived array follows (:func:`set_split_inputs`)."""
-    old = split.penalties
+    old = split_penalties(split)
     z, y = split_variables(split, state)
-    ratios = (old.data / penalties.data, old.tv / penalties.tv, old.nonneg / penalties.nonneg)
     split.set_penalties(penalties)
-    set_split_inputs(split, state, [a + b * np.float32(r) for a, b, r in zip(z, y, ratios)])
+    ratios = [mu / new for mu, new in zip(old, split_penalties(split))]
+    set_split_inputs(split, state, [a + b * np.float32(r) if np.ndim(r) == 0 else a + b * r.astype(np.float32)
+                                    for a, b, r in zip(z, y, ratios)])
 
 
 class Spectral:
@@ -226,8 +236,7 @@ class Spectral:
         images = split_images(split, state)
         result = split.splits(state, split.relaxation)
         z, y = split_variables(split, state)
-        p = split.penalties
-        mus = (p.data, p.tv, p.nonneg)
+        mus = split_penalties(split)
         now = {"image": images, "z": z, "dual": [mu * b for mu, b in zip(mus, y)],
                "hat": [mu * (b + k - a) for mu, k, a, b in zip(mus, images, z_old, y_old)]}
         self.iteration += 1
@@ -238,8 +247,6 @@ class Spectral:
         return result
 
     def adapt(self, split, state, now: dict) -> None:
-        from clsdcam.algorithms.admm.terms import Penalties
-
         p, a = split.penalties, self.anchor
         new = []
         for j, mu in enumerate((p.data, p.tv, p.nonneg)):
@@ -251,7 +258,7 @@ class Spectral:
             new.append(spectral_penalty(mu, first, second))
         if new != [p.data, p.tv, p.nonneg]:
             self.events["restarts"] += 1
-            change_penalties(split, state, Penalties(*new))
+            change_penalties(split, state, replace(p, data=new[0], tv=new[1], nonneg=new[2]))
 
 
 @contextmanager

@@ -28,7 +28,8 @@ today`` takes the weight from today's run instead, and ``--replay`` replays the 
 cached reference runs.
 
 ``--variants 'alpha=1.7,tv=0.003;alpha=1'`` measures ADMM's constants instead (``clsdcam.algorithms.admm``'s DATA,
-TV, NONNEG and RELAXATION, by the names data, tv, nonneg and alpha): each variant runs ``--variant-iters`` at the
+TV, NONNEG, RELAXATION and BALANCE_AT, and THRESHOLD_OVER_RMS of its balance, by the names data, tv, nonneg, alpha,
+balance_at and balance; ``balance_at=1e9``: no balance): each variant runs ``--variant-iters`` at the
 scene's weight, scored every 10 iterations, and the table gives the mark from which it stays within the rules and
 where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``variants.json``). The names
 ``momentum`` (restart factor η), ``anderson`` (memory m) and ``spectral`` (period T) run one of
@@ -43,6 +44,7 @@ import hashlib
 import sys
 import time
 from contextlib import contextmanager
+from importlib import import_module
 from pathlib import Path
 
 import numpy as np
@@ -166,7 +168,10 @@ def settled_within(points: list[dict], ref: dict) -> int | None:
     return next((int(points[i]["iteration"]) for i in range(len(points)) if all(inside[i:])), None)
 
 
-ADMM_CONSTANTS = {"data": "DATA", "tv": "TV", "nonneg": "NONNEG", "alpha": "RELAXATION"}
+# a constant's name -> (its module in clsdcam.algorithms.admm, the constant)
+ADMM_CONSTANTS = {"data": ("algorithm", "DATA"), "tv": ("algorithm", "TV"), "nonneg": ("algorithm", "NONNEG"),
+                  "alpha": ("algorithm", "RELAXATION"), "balance_at": ("algorithm", "BALANCE_AT"),
+                  "balance": ("balance", "THRESHOLD_OVER_RMS")}
 STARTS = {"fista_start": "fista", "answer_start": "admm"}   # a start's name -> the algorithm that makes its cube
 VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS, *STARTS)  # the constants, the accelerations, the starts
 
@@ -185,17 +190,17 @@ def parse_variants(text: str) -> list[dict]:
 @contextmanager
 def admm_constants(variant: dict):
     """ADMM's module constants set to ``variant``'s (restored after; its other names are not constants)."""
-    from clsdcam.algorithms.admm import algorithm
-
-    saved = {name: getattr(algorithm, name) for name in ADMM_CONSTANTS.values()}
+    places = {key: (import_module(f"clsdcam.algorithms.admm.{module}"), name)
+              for key, (module, name) in ADMM_CONSTANTS.items()}
+    saved = {key: getattr(*place) for key, place in places.items()}
     try:
         for key, value in variant.items():
-            if key in ADMM_CONSTANTS:
-                setattr(algorithm, ADMM_CONSTANTS[key], value)
+            if key in places:
+                setattr(*places[key], value)
         yield
     finally:
-        for name, value in saved.items():
-            setattr(algorithm, name, value)
+        for key, value in saved.items():
+            setattr(*places[key], value)
 
 
 def variant_start(sim, tau: float, variant: dict) -> tuple:

@@ -2,6 +2,7 @@
 
 * :mod:`.algorithm`: :class:`Admm`, what the driver runs, and its penalties;
 * :mod:`.terms`: the penalties, the state's arrays, the calibration's terms and the steps' common base;
+* :mod:`.balance`: the TV split's penalty balanced along each axis, once, from the iterate's differences;
 * :mod:`.host_steps`: the steps on NumPy arrays (row blocks on the host's threads);
 * :mod:`.kernel_steps`: the steps as ``kernels/admm.cl`` on a backend with programs (OpenCL), chosen by
   :func:`band_steps` from the backend's optional :class:`~clsdcam.backends.base.Programs`, never by its name.

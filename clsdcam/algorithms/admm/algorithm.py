@@ -5,10 +5,11 @@ step with its dual:
 
     v, Hv ← c-step(x − ξ, u − η, w − ρ);   x, ξ ← x-step(Hv + ξ);   u, η ← u-step(Dv + η);   w, ρ ← w-step(v + ρ)
 
-The iterate the driver sees is w, the non-negative copy of v. The penalties are fixed relative to the problem's own
+The iterate the driver sees is w, the non-negative copy of v. The penalties start relative to the problem's own
 scales (so a brighter scene, another PSF normalisation or filter gain needs no new values): μ₁ = ``DATA``·mean‖f_p‖²,
 μ₂ = ``TV``·μ₁·max|Ĥ|², μ₃ = ``NONNEG``·μ₁·max|Ĥ|² (:func:`penalties_for`; how they were chosen, and why residual
-balancing is not used: docs/admm.md).
+balancing is not used: docs/admm.md). After ``BALANCE_AT`` iterations the TV split's is set along each axis from the
+iterate's differences, once (:mod:`.balance`).
 
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
@@ -22,6 +23,7 @@ from typing import TYPE_CHECKING
 
 from ...backends.base import Programs
 from ...errors import InputError
+from ...solve.auto_weights import AUTO_AT
 from ...solve.priors import Sparsity, TotalVariation
 from ..base import Algorithm, ratio
 
@@ -32,6 +34,7 @@ if TYPE_CHECKING:                 # the parser lists the algorithms: the steps' 
 # (docs/convergence.md, "A faster ADMM"); docs/admm.md has the first choice, made for the first 100 iterations
 DATA, TV, NONNEG = 1e-2, 1e-2, 1e-2
 RELAXATION = 1.7
+BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
 
 
 def penalties_for(split: "SplittingBase") -> "Penalties":
@@ -81,18 +84,30 @@ class Admm(Algorithm):
         self.splitting: "SplittingBase | None" = None
         self.state = None
         self._resumed = None
+        self._iterations = 0       # this solve's, for the TV penalties' balance at BALANCE_AT (balance.py)
 
     def iterate(self, problem) -> dict:
         if self.splitting is None:
-            self.splitting = band_steps(problem)
-            self.splitting.set_penalties(penalties_for(self.splitting))
-            if self._resumed is not None and self._resumed.v.shape == self.splitting.shape:
-                self.state = self._resumed
-            else:
-                self.reset(self.x)
-            self._resumed = None
+            self._build(problem)
+        if self._iterations == BALANCE_AT and self.splitting.axes and self.state.penalties.tv_balance is None:
+            from .balance import balance
+
+            balance(self.splitting, self.state, self.backend.to_host(self.state.w))
+        self._iterations += 1
         data, (step, norm) = self.splitting.iterate(self.state)
         return {"data": data, "change": ratio(step, norm)}
+
+    def _build(self, problem) -> None:
+        """The steps for ``problem``, and the state: a resumed one (with the penalties its duals are in) or a start
+        from the iterate."""
+        self.splitting = band_steps(problem)
+        resumed = self._resumed if self._resumed is not None and self._resumed.v.shape == self.splitting.shape else None
+        self.splitting.set_penalties(resumed.penalties if resumed is not None else penalties_for(self.splitting))
+        if resumed is not None:
+            self.state = resumed
+        else:
+            self.reset(self.x)
+        self._resumed = None
 
     def transforms(self, problem) -> int:
         """The c-step's: 2K forward and 2K inverse, every band (after the first iteration built the steps)."""

@@ -100,7 +100,8 @@ class Splitting(SplittingBase):
                            xi=zeros((self.n_bands,) + self.sensor_shape, self.dtype), rho=zeros(cube, self.dtype),
                            w=zeros(cube, self.dtype), eta=zeros(per_axis, self.dtype), s=zeros(per_axis, self.dtype),
                            rest=zeros(cube, self.dtype),
-                           spectra=(zeros(spectrum, self.cdtype), zeros(spectrum, self.cdtype)))
+                           spectra=(zeros(spectrum, self.cdtype), zeros(spectrum, self.cdtype)),
+                           penalties=self.penalties)
         state.hv[...] = self.convolve(state.v)
         data, _ = self.splits(state)
         return state, data
@@ -200,19 +201,26 @@ class Splitting(SplittingBase):
             s -= eta
 
     def _add_tv_adjoint(self, state: SplitState) -> None:
-        """rest += μ₂ΣD_dᵀs_d on row blocks."""
+        """rest += Σ_d μ₂,d·D_dᵀs_d on row blocks."""
         k, hp, wp = self.shape
-        mu = self.penalties.tv
 
         def block(y0, y1, scratch):
             out = state.rest[:, y0:y1]
             for i, axis in enumerate(self.axes):
                 s = state.s[i]
                 above = s[:, (y0 - 1) % hp] if axis == 1 else None
-                difference_adjoint_add(s[:, y0:y1], axis, mu, out, above=above, scratch=scratch)
+                difference_adjoint_add(s[:, y0:y1], axis, self.penalties.tv_along(axis), out, above=above,
+                                       scratch=scratch)
 
         if self.axes:
             map_blocks(block, hp, k * wp * self.dtype.itemsize, self.workers)
+
+    def rescale_tv_duals(self, state: SplitState, ratios: dict) -> None:
+        """s_d ← s_d + (1 − r_d)η_d, η_d ← r_d·η_d for each active axis d, r_d = ``ratios[d]`` (:mod:`.balance`)."""
+        for i, axis in enumerate(self.axes):
+            r = self.dtype.type(ratios[axis])
+            state.s[i] += (self.dtype.type(1) - r) * state.eta[i]
+            state.eta[i] *= r
 
     def _divide(self, data: np.ndarray, rest: np.ndarray) -> None:
         """data ← v̂ = IDCT_λ[DCT_λ(μ₁conj(Ĥ)·data + rest)/divisor], rest ← Ĥ·v̂, on row blocks of the spectra."""

@@ -67,7 +67,8 @@ class KernelSplitting(SplittingBase):
         state = SplitState(v=be.copy(v0), hv=be.empty(cube), x=be.zeros(cube),
                            xi=be.zeros((self.n_bands,) + self.sensor_shape),
                            rho=be.zeros(cube), w=be.zeros(cube), eta=be.zeros(per_axis), s=be.zeros(per_axis),
-                           rest=be.empty(cube), spectra=(be.empty(spectrum, True), be.empty(spectrum, True)))
+                           rest=be.empty(cube), spectra=(be.empty(spectrum, True), be.empty(spectrum, True)),
+                           penalties=self.penalties)
         self._convolve(state.v, state.spectra[0], state.hv)
         data, _ = self.splits(state)
         return state, data
@@ -94,16 +95,27 @@ class KernelSplitting(SplittingBase):
                                                      state.rest, self._real(self.nonneg_shift()),
                                                      self._real(self.penalties.nonneg), alpha, outputs=2))
         if self.axes:
-            limits = [self._real(self.threshold(axis) if axis in self.axes else 0.0) for axis in range(3)]
-            k.grid3("admm_u_step", self.shape, state.eta, state.s, state.v, *ints(bands, hp, wp), self.mask, *limits,
-                    alpha)
+            k.grid3("admm_u_step", self.shape, state.eta, state.s, state.v, *ints(bands, hp, wp), self.mask,
+                    *self._per_axis(self.threshold), alpha)
         return self.backend.drained(data), (step, norm)
 
     def _add_tv_adjoint(self, state: SplitState) -> None:
-        """rest += μ₂ΣD_dᵀs_d (one kernel)."""
+        """rest += Σ_d μ₂,d·D_dᵀs_d (one kernel)."""
         if self.axes:
             self.kernels.grid3("admm_tv_adjoint", self.shape, state.rest, state.s, *ints(*self.shape), self.mask,
-                               self._real(self.penalties.tv))
+                               *self._per_axis(self.penalties.tv_along))
+
+    def rescale_tv_duals(self, state: SplitState, ratios: dict) -> None:
+        """s_d ← s_d + (1 − r_d)η_d, η_d ← r_d·η_d for each active axis d, r_d = ``ratios[d]`` (one kernel)."""
+        if self.axes:
+            n = int(np.prod(self.shape))
+            self.kernels.grid1("admm_rescale_tv_duals", n, state.eta, state.s, np.int64(n), self.mask,
+                               *self._per_axis(ratios.get))
+
+    def _per_axis(self, value) -> list:
+        """``value(axis)`` for each active axis, 0 for the others, in the backend's precision (a kernel's three
+        arguments)."""
+        return [self._real(value(axis) if axis in self.axes else 0.0) for axis in range(3)]
 
     def _divide(self, data, rest) -> None:
         """data ← v̂ = Cᵀ[C(μ₁conj(Ĥ)·data + rest)·divisor] (C the DCT along λ), rest ← Ĥ·v̂."""

@@ -12,20 +12,26 @@ from ...camera.geometry import transfer_function
 TERMS_KEY = "admm calibration terms"     # the solver's shared store keeps the CalibrationTerms under this name
 
 
-@dataclass
+@dataclass(frozen=True)
 class Penalties:
-    """μ₁ (data split), μ₂ (TV split), μ₃ (non-negativity split), absolute."""
+    """μ₁ (data split), μ₂ (TV split), μ₃ (non-negativity split), absolute; the TV split's along axis d (0: λ, 1: y,
+    2: x) is μ₂,d = μ₂·β_d, ``tv_balance`` the β_d (None, every β_d 1, until :mod:`.balance` sets them)."""
 
     data: float
     tv: float
     nonneg: float
+    tv_balance: tuple | None = None
+
+    def tv_along(self, axis: int) -> float:
+        """μ₂,d."""
+        return self.tv if self.tv_balance is None else self.tv * self.tv_balance[axis]
 
 
 @dataclass
 class SplitState:
     """ADMM's arrays: v and Hv (the c-step's; Hv then holds x − ξ), x (the data split, kept for the relaxation),
     ξ on the sensor window, ρ, w (the iterate), η_d and s_d = u_d − η_d per active TV axis, the right-hand side's
-    rest, the two spectra."""
+    rest, the two spectra; and the penalties the scaled duals are in (a video's next frame resumes with them)."""
 
     v: np.ndarray
     hv: np.ndarray
@@ -37,10 +43,11 @@ class SplitState:
     s: np.ndarray
     rest: np.ndarray
     spectra: tuple
+    penalties: Penalties | None = None
 
     def arrays(self) -> list:
         """Every array of the state but the spectra (what a resumed solve scales into its units)."""
-        return [getattr(self, f.name) for f in fields(self) if f.name != "spectra"]
+        return [getattr(self, f.name) for f in fields(self) if f.name not in ("spectra", "penalties")]
 
 
 def band_eigenvalues(n_bands: int) -> np.ndarray:
@@ -73,7 +80,8 @@ class CalibrationTerms:
         self._uploads: dict = {}    # term name -> (backend, host array, its device copy)
 
     def for_penalties(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ), 1/(μ₁|Ĥ|² + μ₂(|d̂_y|² + |d̂_x|² + Λ_j) + μ₃)), TV's terms on ``axes`` only."""
+        """(f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ), 1/(μ₁|Ĥ|² + μ₂,y|d̂_y|² + μ₂,x|d̂_x|² + μ₂,λΛ_j + μ₃)), TV's terms on ``axes``
+        only."""
         key = (astuple(p), tuple(axes))
         if self._last is None or self._last[0] != key:
             self._last = (key, self._penalty_terms(p, axes))
@@ -94,10 +102,10 @@ class CalibrationTerms:
         hp, wp = self.field_shape
         spatial = p.data * self.transfer_power
         if 1 in axes:
-            spatial = spatial + p.tv * difference_spectrum(hp)[:, None]
+            spatial = spatial + p.tv_along(1) * difference_spectrum(hp)[:, None]
         if 2 in axes:
-            spatial = spatial + p.tv * difference_spectrum(wp, half=True)[None, :]
-        spectral = p.tv * band_eigenvalues(self.n_bands) if 0 in axes else np.zeros(self.n_bands)
+            spatial = spatial + p.tv_along(2) * difference_spectrum(wp, half=True)[None, :]
+        spectral = p.tv_along(0) * band_eigenvalues(self.n_bands) if 0 in axes else np.zeros(self.n_bands)
         return gain, data_transfer, (1.0 / (spatial[None] + spectral[:, None, None] + p.nonneg)).astype(self.dtype)
 
 
@@ -144,8 +152,8 @@ class SplittingBase:
         self._gain, self._data_transfer, self._inverse = self.terms.for_penalties(penalties, self.axes)
 
     def threshold(self, axis: int) -> float:
-        """The u-step's soft threshold τw_d/μ₂ along ``axis``."""
-        return self.tv.weight * self.tv.axis_weights[axis] / self.penalties.tv
+        """The u-step's soft threshold τw_d/μ₂,d along ``axis``."""
+        return self.tv.weight * self.tv.axis_weights[axis] / self.penalties.tv_along(axis)
 
     def nonneg_shift(self) -> float:
         """The w-step's shift τ₁/μ₃ (0 without the L1 prior)."""

@@ -1,0 +1,57 @@
+"""The TV split's penalty balanced along each axis, once (docs/convergence.md, "Balanced TV penalties").
+
+The u-step soft-thresholds D_d v + η_d at t_d = τw_d/μ₂,d. With one μ₂ for every axis, set from the camera's scales
+alone, t_d bears no relation to the cube's own differences: on the tuning panel it was 0.4–0.9 times their RMS on
+scenes of narrow lines and sparse spots, 4–16 times on smooth or dark ones, and ADMM is slow at both ends.
+After :data:`~.algorithm.BALANCE_AT` iterations (when ``--tv auto`` has chosen τ and the iterate has its edges),
+each active axis's penalty is set so its threshold is ``THRESHOLD_OVER_RMS`` times the RMS of the iterate's
+differences along it:
+
+    μ₂,d = τw_d / (C·rms(D_d w)),   C = THRESHOLD_OVER_RMS,
+
+held within a factor ``BALANCE_RANGE`` of the camera's μ₂ (a flat or black cube's RMS says nothing). The unscaled
+duals μ₂,d·η_d are kept (η_d ← r_d·η_d, s_d ← s_d + (1 − r_d)η_d with r_d = μ₂,d/μ₂,d', so u_d = s_d + η_d stays):
+the iteration goes on from the same point, with one new divisor. The RMS is read on the host (one download of w,
+once per solve), so both backends set the same penalties.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .host_steps import difference
+from .terms import Penalties, SplitState, SplittingBase
+
+THRESHOLD_OVER_RMS = 2.0      # C: chosen on the tuning panel (docs/convergence.md)
+BALANCE_RANGE = 64.0          # β_d within [1/64, 64]
+
+
+def difference_rms(split: SplittingBase, w: np.ndarray) -> dict[int, float]:
+    """rms(D_d w) for each active TV axis (accumulated in float64)."""
+    out = np.empty_like(w)
+    return {axis: float(np.sqrt(np.mean(np.square(difference(w, axis, out), dtype=np.float64))))
+            for axis in split.axes}
+
+
+def balanced_penalties(split: SplittingBase, rms: dict[int, float]) -> Penalties:
+    """The penalties with each active axis's β_d = τw_d/(C·rms_d·μ₂) (the module docstring); an axis whose
+    differences are all zero, or the whole TV when its weight is zero, keeps its β_d."""
+    p, tau = split.penalties, split.tv.weight
+    betas = [1.0, 1.0, 1.0] if p.tv_balance is None else list(p.tv_balance)
+    for axis, value in rms.items():
+        if value > 0 and tau > 0:
+            beta = tau * split.tv.axis_weights[axis] / (THRESHOLD_OVER_RMS * value * p.tv)
+            betas[axis] = float(np.clip(beta, 1.0 / BALANCE_RANGE, BALANCE_RANGE))
+    return replace(p, tv_balance=tuple(betas))
+
+
+def balance(split: SplittingBase, state: SplitState, w_host: np.ndarray) -> Penalties:
+    """Set the balanced penalties from the iterate ``w_host`` (w on the host), the TV duals rescaled to keep the
+    unscaled ones; the state records them (a video's next frame resumes with them). Returns them."""
+    old = split.penalties
+    new = balanced_penalties(split, difference_rms(split, w_host))
+    split.rescale_tv_duals(state, {axis: old.tv_along(axis) / new.tv_along(axis) for axis in split.axes})
+    split.set_penalties(new)
+    state.penalties = new
+    return new
