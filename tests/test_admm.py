@@ -34,7 +34,7 @@ def tiny(request, monkeypatch):
     tv = TotalVariation(model.backend, 0.05, Settings(tv_weights=(1.0, 0.5, 2.0)))
     split = Splitting(model, RNG.random((4, 5)), CalibrationTerms(model, filters), tv=tv,
                       l1=Sparsity(model.backend, 0.4, None), workers=2)
-    split.set_penalties(Penalties(data=0.3, tv=0.7, nonneg=1.3))
+    split.set_penalties(Penalties(data=0.3, tv=0.7, nonneg=1.3, tv_balance=(0.6, 1.7, 1.2)))
     return model, split
 
 
@@ -99,15 +99,16 @@ def test_the_x_differences_along_row_runs_match_the_columnwise_ones_bit_for_bit(
 
 
 def test_the_c_step_solves_its_normal_equations(tiny):
-    """(μ₁HᵀH + μ₂ΣD_dᵀD_d + μ₃I)v = μ₁Hᵀ(x − ξ) + μ₂ΣD_dᵀs_d + μ₃(w − ρ) (x − ξ in ``hv``, μ₃(w − ρ) in ``rest``),
-    against a dense solve; and Hv."""
+    """(μ₁HᵀH + Σ_d μ₂,dD_dᵀD_d + μ₃I)v = μ₁Hᵀ(x − ξ) + Σ_d μ₂,dD_dᵀs_d + μ₃(w − ρ) (x − ξ in ``hv``, μ₃(w − ρ) in
+    ``rest``; each axis with its own TV penalty), against a dense solve; and Hv."""
     _, split = tiny
     p, shape = split.penalties, split.shape
     state = random_state(split)
     H = dense(split.convolve, shape)
     D = [dense(lambda e, a=axis: difference(e, a, np.empty_like(e)), shape) for axis in split.axes]
-    system = p.data * H.T @ H + p.tv * sum(d.T @ d for d in D) + p.nonneg * np.eye(H.shape[0])
-    rhs = p.data * H.T @ np.ravel(state.hv) + p.tv * sum(d.T @ np.ravel(s) for d, s in zip(D, state.s)) \
+    mu = [p.tv_along(axis) for axis in split.axes]
+    system = p.data * H.T @ H + sum(m * d.T @ d for m, d in zip(mu, D)) + p.nonneg * np.eye(H.shape[0])
+    rhs = p.data * H.T @ np.ravel(state.hv) + sum(m * d.T @ np.ravel(s) for m, d, s in zip(mu, D, state.s)) \
         + np.ravel(state.rest)
     expected = np.linalg.solve(system, rhs)
     split.c_step(state)
@@ -129,7 +130,7 @@ def test_h_is_the_models_convolution_in_the_window(tiny):
 def test_the_splits_minimise_their_problems(tiny, alpha):
     """Against brute force, each split at its over-relaxed point (α·K v + (1 − α)·z + dual, z the split's last value:
     x, u = s + η, w): x_p = argmin ½(b_p − f_pᵀx_p)² + μ₁/2‖x_p − q_p‖² (a K×K solve per pixel; q outside the window),
-    u = argmin τw_d|u| + μ₂/2(u − q)², w = argmin τ₁|w| + ι(w ≥ 0) + μ₃/2(w − q)² (grid searches); each dual = q − z,
+    u = argmin τw_d|u| + μ₂,d/2(u − q)², w = argmin τ₁|w| + ι(w ≥ 0) + μ₃/2(w − q)² (grid searches); each dual = q − z,
     and what the c-step reads: x − ξ, s = u − η, μ₃(w − ρ); the data term at v and w's change."""
     _, split = tiny
     p, (h, w) = split.penalties, split.sensor_shape
@@ -153,7 +154,7 @@ def test_the_splits_minimise_their_problems(tiny, alpha):
     np.testing.assert_allclose(state.xi, (q_x - x)[:, :h, :w], atol=1e-12)
     np.testing.assert_allclose(state.hv, x - (q_x - x), atol=1e-12)
     for i, axis in enumerate(split.axes):
-        weight = split.tv.weight * split.tv.axis_weights[axis] / p.tv
+        weight = split.tv.weight * split.tv.axis_weights[axis] / p.tv_along(axis)
         u = np.array([grid_argmin(lambda g: weight * np.abs(g), q) for q in q_u[i].ravel()[:40]])
         np.testing.assert_allclose(state.eta[i].ravel()[:40], q_u[i].ravel()[:40] - u, atol=2e-4)
         np.testing.assert_allclose(state.s[i], (q_u[i] - state.eta[i]) - state.eta[i], atol=1e-12)
@@ -246,7 +247,7 @@ def test_the_balance_holds_each_axis_within_its_range_and_leaves_a_flat_axis(tin
     model, split = tiny
     w = np.broadcast_to(RNG.random(split.shape[1:]), split.shape).copy()
     betas = balance.balanced_penalties(split, balance.difference_rms(split, w)).tv_balance
-    assert betas[0] == 1.0
+    assert betas[0] == split.penalties.tv_balance[0]
     tiny_rms = balance.balanced_penalties(split, {1: 1e-12, 2: 1e12}).tv_balance
     assert tiny_rms[1:] == (balance.BALANCE_RANGE, 1.0 / balance.BALANCE_RANGE)
 
@@ -255,18 +256,20 @@ def test_admm_balances_once_at_its_mark_and_a_resumed_frame_keeps_the_penalties(
     """A solve past BALANCE_AT iterations balances once, at that mark (the record of every later iteration is
     after it); a solve that ends before it keeps the camera's penalties; the next frame resumes with the balanced
     penalties and does not balance again."""
-    calls = []
+    done, calls = [0], []                # iterations recorded; the iterations done when the balance ran
     real = balance.balance
-    monkeypatch.setattr(balance, "balance", lambda *a: calls.append(a) or real(*a))
-    solver = Solver(leds.calibration, settings=Settings(iters=admm.algorithm.BALANCE_AT, algorithm="admm"))
-    short = solver.solve(leds.measurement)
+    monkeypatch.setattr(balance, "balance", lambda *a: calls.append(done[0]) or real(*a))
+    progress = lambda record: done.__setitem__(0, record["iteration"])
+    at = admm.algorithm.BALANCE_AT
+    solver = Solver(leds.calibration, settings=Settings(iters=at, algorithm="admm"))
+    short = solver.solve(leds.measurement, progress=progress)
     assert not calls and short.state.carry[0].penalties.tv_balance is None
-    solver = Solver(leds.calibration, settings=Settings(iters=admm.algorithm.BALANCE_AT + 5, algorithm="admm"))
-    first = solver.solve(leds.measurement)
+    solver = Solver(leds.calibration, settings=Settings(iters=at + 5, algorithm="admm"))
+    first = solver.solve(leds.measurement, progress=progress)
     carried = first.state.carry[0].penalties
-    assert len(calls) == 1 and carried.tv_balance is not None
-    resumed = solver.solve(leds.measurement, state=first.state, iters=admm.algorithm.BALANCE_AT + 5)
-    assert len(calls) == 1 and resumed.state.carry[0].penalties is carried
+    assert calls == [at] and carried.tv_balance is not None
+    resumed = solver.solve(leds.measurement, state=first.state, iters=at + 5, progress=progress)
+    assert calls == [at] and resumed.state.carry[0].penalties is carried
 
 
 def test_a_solver_builds_the_calibrations_terms_once_and_a_fresh_solver_gives_the_same_cube(leds):

@@ -25,6 +25,7 @@ its penalty: ‖q‖² = μ₁‖q_data‖² + μ₂Σ‖q_d‖² + μ₃‖q_no
 """
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 from dataclasses import replace
 
@@ -210,6 +211,7 @@ def change_penalties(split, state, penalties) -> None:
     old = split_penalties(split)
     z, y = split_variables(split, state)
     split.set_penalties(penalties)
+    state.penalties = penalties
     ratios = [mu / new for mu, new in zip(old, split_penalties(split))]
     set_split_inputs(split, state, [a + b * np.float32(r) if np.ndim(r) == 0 else a + b * r.astype(np.float32)
                                     for a, b, r in zip(z, y, ratios)])
@@ -258,13 +260,16 @@ class Spectral:
             new.append(spectral_penalty(mu, first, second))
         if new != [p.data, p.tv, p.nonneg]:
             self.events["restarts"] += 1
-            change_penalties(split, state, replace(p, data=new[0], tv=new[1], nonneg=new[2]))
+            change_penalties(split, state, replace(p, data=new[0], tv=new[1], nonneg=new[2], tv_balance=None))
 
 
 @contextmanager
 def accelerated(variant: dict):
     """ADMM's host iteration wrapped by the acceleration ``variant`` names (none: as built), restored after; yields
-    the events (restarts or dropped points) it counts."""
+    the events (restarts or dropped points) it counts. An accelerated ADMM runs without the TV penalties' balance
+    (``clsdcam.algorithms.admm.balance``): the accelerations were measured before it, and their memories of past
+    splits and duals would mix two penalties' scales."""
+    from clsdcam.algorithms.admm import algorithm
     from clsdcam.algorithms.admm.terms import SplittingBase
 
     events = {"restarts": 0}
@@ -280,11 +285,11 @@ def accelerated(variant: dict):
             split._acceleration = factory(value, events)
         return split._acceleration(split, plain, state)
 
-    SplittingBase.iterate = iterate
+    SplittingBase.iterate, balance_at, algorithm.BALANCE_AT = iterate, algorithm.BALANCE_AT, math.inf
     try:
         yield events
     finally:
-        SplittingBase.iterate = plain
+        SplittingBase.iterate, algorithm.BALANCE_AT = plain, balance_at
 
 
 ACCELERATIONS = {"momentum": Momentum, "anderson": Anderson, "spectral": Spectral}   # the variant names it reads
