@@ -245,21 +245,25 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
 
     constants = lambda: (algorithm.RELAXATION, algorithm.TV, algorithm.BALANCE_AT, balance.THRESHOLD_OVER_RMS)
     before = constants()
-    bench_converged.main([*ONE_PIECEWISE_SCENE, "--variants", "alpha=1;alpha=1.7,tv=0.003,balance=3,balance_at=40",
+    bench_converged.main([*ONE_PIECEWISE_SCENE, "--variants",
+                          "alpha=1,balance_at=1e9;alpha=1.7,tv=0.003,balance=3,balance_at=40",
                           "--variant-iters", "160", "--replay", "1e9", "--cache", str(tmp_path / "cache"),
                           "--out", str(tmp_path)])
     assert constants() == before
     scene = json.loads((tmp_path / "variants.json").read_text())["scenes"][0]
     plain, relaxed = scene["variants"]
-    assert plain["variant"] == {"alpha": 1.0}
+    assert plain["variant"] == {"alpha": 1.0, "balance_at": 1e9} and plain["balance"] is None
     assert relaxed["variant"] == {"alpha": 1.7, "tv": 0.003, "balance": 3.0, "balance_at": 40.0}
+    assert len(relaxed["balance"]) == 3 and all(b > 0 for b in relaxed["balance"])
     first_stops = [stop["iteration"] for stop in (plain["stops"][0], relaxed["stops"][0])]
     assert first_stops == [bench_converged.AUTO_AT + 100] * 2
     points = [{"iteration": 10, "psnr": 0.0, "angle": 0.0}, {"iteration": 20, "psnr": 9.0, "angle": 0.0},
               {"iteration": 30, "psnr": 0.0, "angle": 0.0}, {"iteration": 40, "psnr": 9.0, "angle": 1.0}]
     assert bench_converged.settled_within(points, {"psnr": 9.1, "angle": 0.6}) == 40
     assert bench_converged.settled_within(points, {"psnr": 9.1, "angle": 0.0}) is None
-    assert "| 0 | piecewise, standard | alpha 1.7, tv 0.003, balance 3, balance_at 40 |" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "| 0 | piecewise, standard | alpha 1.7, tv 0.003, balance 3, balance_at 40 |" in out
+    assert "| 0 | piecewise, standard | alpha 1, balance_at 1e+09 | 0 |" in out
 
 
 def test_anderson_point_is_an_affine_maps_fixed_point_after_as_many_differences_as_dimensions():

@@ -232,22 +232,35 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
                      "stops": [replay_stop(run, t) for t in args.tolerances],
                      "ms_per_iteration": 1e3 * seconds / args.variant_iters, "restarts": events["restarts"],
                      "start_iterations": start_seconds / seconds * args.variant_iters,
-                     "final": run["points"][-1]})
+                     "balance": balance_factors(result), "final": run["points"][-1]})
     return {**plan, "tv": tau, "reference": ref, "variants": rows}
+
+
+def balance_factors(result) -> list | None:
+    """The β_d (λ, y, x) the run's TV penalties were balanced by (times C: the threshold over the differences' RMS
+    the camera's penalty had), or None where it did not balance."""
+    carry = result.state.carry
+    balance = None if carry is None else carry[0].penalties.tv_balance
+    return None if balance is None else list(balance)
 
 
 def variant_rows(results: dict) -> list[str]:
     tolerances = results["replay"]
-    rows = ["| # | kind | variant | start, in its iterations' time | stays within from | restarts | "
+    rows = ["| # | kind | variant | start, in its iterations' time | stays within from | restarts | β_λ, β_y, β_x | "
             + " | ".join(f"stop at {t:g}" for t in tolerances) + " |",
-            "|---:|---|---|---:|---|---:|" + "---|" * len(tolerances)]
+            "|---:|---|---|---:|---|---:|---|" + "---|" * len(tolerances)]
     for s in results["scenes"]:
         for v in s["variants"]:
             name = ", ".join(f"{k} {x:g}" for k, x in v["variant"].items()) or "as built"
             cells = [stop_cell(stop, s["reference"]) for stop in v["stops"]]
             rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {name} | {v['start_iterations']:.0f} | "
-                        f"{v['within'] or '–'} | {v['restarts']} | " + " | ".join(cells) + " |")
+                        f"{v['within'] or '–'} | {v['restarts']} | {balance_cell(v.get('balance'))} | "
+                        + " | ".join(cells) + " |")
     return rows
+
+
+def balance_cell(factors) -> str:
+    return "–" if factors is None else ", ".join(f"{b:.2g}" for b in factors)
 
 
 def margins(scene: dict) -> dict:
