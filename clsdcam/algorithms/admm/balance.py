@@ -1,8 +1,8 @@
 """The TV split's penalty balanced along each axis, once (docs/convergence.md, "Balanced TV penalties").
 
 The u-step soft-thresholds D_d v + η_d at t_d = τw_d/μ₂,d. With one μ₂ for every axis, set from the camera's scales
-alone, t_d bears no relation to the cube's own differences: on the tuning panel it was 0.4–0.9 times their RMS on
-scenes of narrow lines and sparse spots, 4–16 times on smooth or dark ones, and ADMM is slow at both ends.
+alone, t_d bears no relation to the cube's own differences: on the tuning panel it was 0.6–1.8 times their RMS on
+a scene of narrow lines, 11–26 times on natural and real ones, and ADMM is slow at both ends.
 After :data:`~.algorithm.BALANCE_AT` iterations (when ``--tv auto`` has chosen τ and the iterate has its edges),
 each active axis's penalty is set so its threshold is ``THRESHOLD_OVER_RMS`` times the RMS of the iterate's
 differences along it:
