@@ -213,8 +213,7 @@ def change_penalties(split, state, penalties) -> None:
     split.set_penalties(penalties)
     state.penalties = penalties
     ratios = [mu / new for mu, new in zip(old, split_penalties(split))]
-    set_split_inputs(split, state, [a + b * np.float32(r) if np.ndim(r) == 0 else a + b * r.astype(np.float32)
-                                    for a, b, r in zip(z, y, ratios)])
+    set_split_inputs(split, state, [a + b * np.asarray(r, np.float32) for a, b, r in zip(z, y, ratios)])
 
 
 class Spectral:
@@ -285,7 +284,8 @@ def accelerated(variant: dict):
             split._acceleration = factory(value, events)
         return split._acceleration(split, plain, state)
 
-    SplittingBase.iterate, balance_at, algorithm.BALANCE_AT = iterate, algorithm.BALANCE_AT, math.inf
+    balance_at = algorithm.BALANCE_AT
+    SplittingBase.iterate, algorithm.BALANCE_AT = iterate, math.inf
     try:
         yield events
     finally:

@@ -101,13 +101,13 @@ class Admm(Algorithm):
         """The steps for ``problem``, and the state: a resumed one (with the penalties its duals are in) or a start
         from the iterate."""
         self.splitting = band_steps(problem)
-        resumed = self._resumed if self._resumed is not None and self._resumed.v.shape == self.splitting.shape else None
-        self.splitting.set_penalties(resumed.penalties if resumed is not None else penalties_for(self.splitting))
-        if resumed is not None:
+        resumed, self._resumed = self._resumed, None
+        if resumed is not None and resumed.v.shape == self.splitting.shape:
+            self.splitting.set_penalties(resumed.penalties)
             self.state = resumed
         else:
+            self.splitting.set_penalties(penalties_for(self.splitting))
             self.reset(self.x)
-        self._resumed = None
 
     def transforms(self, problem) -> int:
         """The c-step's: 2K forward and 2K inverse, every band (after the first iteration built the steps)."""
