@@ -200,7 +200,8 @@ def test_bench_panel_draws_fresh_scenes_of_every_kind_and_judges_both_rules(tmp_
 def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_path, capsys, monkeypatch):
     """Each scene: today, the default and both references; the answer is the better reference final per metric, the
     margins follow from the finals; a replay reads the references from the cache (no new file) and gives the same
-    reference; the stop replayed at a huge tolerance stops where the estimate first exists."""
+    reference; the stop replayed at a huge tolerance stops where the estimate first exists, and so does the default
+    run at that tolerance (--converge)."""
     monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
     monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise", "sparse"])
     args = ["--size", "24x32", "--bands", "4", "--scenes", "2", "--seed", "3", "--reference-iters", "150",
@@ -220,10 +221,12 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
         assert stop["iteration"] == bench_converged.AUTO_AT + 4 * 25     # four windows after the weight's restart
     text = capsys.readouterr().out
     assert "| 0 | piecewise | standard |" in text and "stop at 1e+09" in text
-    bench_converged.main(args[:-1] + [str(tmp_path / "b")])
+    bench_converged.main(args[:-1] + [str(tmp_path / "b"), "--converge", "1e9"])
     again = json.loads((tmp_path / "b" / "converged.json").read_text())
     assert sorted((tmp_path / "cache").iterdir()) == cached
     assert [s["reference"] for s in again["scenes"]] == [s["reference"] for s in first["scenes"]]
+    assert again["converge"] == 1e9 and "the default at --converge 1e+09" in capsys.readouterr().out
+    assert [s["default"]["iterations"] for s in again["scenes"]] == [bench_converged.AUTO_AT + 4 * 25] * 2
     assert (tmp_path / "b" / "converged.png").stat().st_size > 0
 
 

@@ -24,8 +24,9 @@ Also reported: FISTA's own seconds to come within 0.2 dB and 0.5° of the refere
 snapshots) over the default's, the speed-up. Writes ``converged.json`` (after every scene), ``converged.md`` and
 ``converged.png`` (every scene's PSNR and angle against seconds: both references' curves, today and the default as
 points, the reference's band). ``--seed`` replays a panel, ``--only I,J`` some scenes of it; ``--weight-from
-today`` takes the weight from today's run instead, and ``--replay`` replays the stop at other tolerances on the
-cached reference runs.
+today`` takes the weight from today's run instead, ``--replay`` replays the stop at other tolerances on the
+cached reference runs, and ``--converge T`` runs the default with another stopping tolerance (the package's
+``--converge`` T: what a new default tolerance would give, judged by the same rules).
 
 ``--variants 'alpha=1.7,tv=0.003;alpha=1'`` measures ADMM's constants instead (``clsdcam.algorithms.admm``'s DATA,
 TV, NONNEG, RELAXATION and BALANCE_AT, and THRESHOLD_OVER_RMS of its balance, by the names data, tv, nonneg, alpha,
@@ -274,10 +275,13 @@ def margins(scene: dict) -> dict:
             "speedup": None if fista_time is None else fista_time / default["seconds"]}
 
 
-def run_scene(plan: dict, shape, bands: int, iters: int, cache: Path, weight_from: str = "default") -> dict:
+def run_scene(plan: dict, shape, bands: int, iters: int, cache: Path, weight_from: str = "default",
+              converge: float | None = None) -> dict:
+    """Today, the default (with ``--converge converge`` where given) and the references of one scene, with the rules'
+    margins."""
     sim = panel_scene(plan, shape, bands)
     today_result, today_seconds = timed_solve(sim, TODAY)
-    default_result, default_seconds = timed_solve(sim, {})
+    default_result, default_seconds = timed_solve(sim, {} if converge is None else {"converge": converge})
     tau = float((default_result if weight_from == "default" else today_result).attrs["tv_chosen"])
     runs = {a: reference_run(sim, plan, tau, a, iters, cache) for a in REFERENCE_ALGORITHMS}
     scene = {**plan, "tv": tau, "today": final_point(sim, today_result, today_seconds),
@@ -316,8 +320,9 @@ def pair(point: dict) -> str:
 
 
 def markdown(results: dict) -> str:
+    tolerance = "" if results.get("converge") is None else f", the default at --converge {results['converge']:g}"
     head = (f"Seed {results['seed']}, {results['size']}×{results['bands']}, references: FISTA and ADMM "
-            f"{results['reference_iters']} iterations, backend {results['backend']}.")
+            f"{results['reference_iters']} iterations, backend {results['backend']}{tolerance}.")
     return "\n".join([head, ""] + summary(results) + ["", "Every scene (PSNR / mean spectral angle):", ""]
                      + scene_rows(results) + ["", "Each reference run: its first scored mark within the rules, and "
                                               "where the stop would have stopped it at each replayed tolerance "
@@ -413,6 +418,8 @@ def main(argv=None) -> int:
                         help="measure ADMM's constants, accelerations or starts instead (names: "
                              f"{', '.join(VARIANT_NAMES)}; the docstring)")
     parser.add_argument("--variant-iters", type=int, default=500, help="each variant's iterations (default 500)")
+    parser.add_argument("--converge", type=float, default=None, metavar="T",
+                        help="the default's stopping tolerance (default: the package's, --converge's default)")
     add_backend_option(parser)
     args = parser.parse_args(argv)
     try:
@@ -428,14 +435,14 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     cache.mkdir(parents=True, exist_ok=True)
     results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "backend": args.backend,
-               "reference_iters": args.reference_iters, "weight_from": args.weight_from,
+               "reference_iters": args.reference_iters, "weight_from": args.weight_from, "converge": args.converge,
                "replay": [float(t) for t in args.replay.split(",") if t], "scenes": []}
     args.tolerances = results["replay"]
     name = "variants" if args.variants else "converged"
     print(f"panel seed {seed}", file=sys.stderr, flush=True)
     for i, plan in chosen:
         scene = (variant_runs(plan, args.size, args.bands, args, cache) if args.variants else
-                 run_scene(plan, args.size, args.bands, args.reference_iters, cache, args.weight_from))
+                 run_scene(plan, args.size, args.bands, args.reference_iters, cache, args.weight_from, args.converge))
         results["scenes"].append({"index": i, **scene})
         scene_done(i, plan, args.scenes)
         save_json(out, name, results)
