@@ -230,6 +230,13 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
     assert (tmp_path / "b" / "converged.png").stat().st_size > 0
 
 
+@pytest.mark.parametrize("tolerance", ["0", "-0.1", "nan"])
+def test_bench_converged_refuses_a_tolerance_that_is_not_positive_before_writing(tmp_path, tolerance):
+    with pytest.raises(SystemExit) as exit_:
+        bench_converged.main(["--converge", tolerance, "--out", str(tmp_path / "out")])
+    assert exit_.value.code == 2 and not (tmp_path / "out").exists()
+
+
 ONE_PIECEWISE_SCENE = ["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--reference-iters", "150"]
 
 

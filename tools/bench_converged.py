@@ -426,6 +426,8 @@ def main(argv=None) -> int:
         args.variants = parse_variants(args.variants)
     except ValueError as error:
         parser.error(str(error))
+    if args.converge is not None and not args.converge > 0:
+        parser.error(f"--converge {args.converge}: must be > 0")
     if args.backend != "numpy" and any(set(v) & set(ACCELERATIONS) for v in args.variants):
         parser.error("--variants momentum/anderson/spectral wrap the host steps: --backend numpy")
     Where.use(args.backend)
