@@ -230,7 +230,7 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
     assert (tmp_path / "b" / "converged.png").stat().st_size > 0
 
 
-@pytest.mark.parametrize("tolerance", ["0", "-0.1", "nan"])
+@pytest.mark.parametrize("tolerance", ["0", "-0.1", "nan", "inf"])
 def test_bench_converged_refuses_a_tolerance_that_is_not_positive_before_writing(tmp_path, tolerance):
     with pytest.raises(SystemExit) as exit_:
         bench_converged.main(["--converge", tolerance, "--out", str(tmp_path / "out")])

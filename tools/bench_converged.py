@@ -54,6 +54,7 @@ from admm_acceleration import ACCELERATIONS, accelerated
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text
 from bench_panel import panel_kinds, panel_scene, scene_plan
 from clsdcam.cli.options import WORK
+from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
 from clsdcam.solve.auto_weights import AUTO_AT
@@ -426,8 +427,11 @@ def main(argv=None) -> int:
         args.variants = parse_variants(args.variants)
     except ValueError as error:
         parser.error(str(error))
-    if args.converge is not None and not args.converge > 0:
-        parser.error(f"--converge {args.converge}: must be > 0")
+    if args.converge is not None:
+        try:
+            Settings(converge=args.converge)          # the package's own rule for --converge
+        except InputError as error:
+            parser.error(str(error))
     if args.backend != "numpy" and any(set(v) & set(ACCELERATIONS) for v in args.variants):
         parser.error("--variants momentum/anderson/spectral wrap the host steps: --backend numpy")
     Where.use(args.backend)
