@@ -219,13 +219,18 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
         assert margins["time_ratio"] == pytest.approx(scene["default"]["seconds"] / scene["today"]["seconds"])
         stop = bench_converged.replay_stop(scene["references"]["admm"], 1e9)
         assert stop["iteration"] == bench_converged.AUTO_AT + 4 * 25     # four windows after the weight's restart
-    text = capsys.readouterr().out
+    text, progress = capsys.readouterr()
     assert "| 0 | piecewise | standard |" in text and "stop at 1e+09" in text
+    assert "piecewise, standard: today's 300 iterations in" in progress
+    assert "sparse, standard: admm's reference, 150 iterations in" in progress
     bench_converged.main(args[:-1] + [str(tmp_path / "b"), "--converge", "1e9"])
     again = json.loads((tmp_path / "b" / "converged.json").read_text())
     assert sorted((tmp_path / "cache").iterdir()) == cached
     assert [s["reference"] for s in again["scenes"]] == [s["reference"] for s in first["scenes"]]
-    assert again["converge"] == 1e9 and "the default at --converge 1e+09" in capsys.readouterr().out
+    text, progress = capsys.readouterr()
+    assert again["converge"] == 1e9 and "the default at --converge 1e+09" in text
+    assert f"the default's {bench_converged.AUTO_AT + 4 * 25} iterations (converged)" in progress
+    assert "reference" not in progress                  # read from the cache: no solve to report
     assert [s["default"]["iterations"] for s in again["scenes"]] == [bench_converged.AUTO_AT + 4 * 25] * 2
     assert (tmp_path / "b" / "converged.png").stat().st_size > 0
 

@@ -73,6 +73,11 @@ def reference_marks(iters: int) -> list[int]:
     return sorted({int(round(m)) for m in np.geomspace(10, iters, 24)})
 
 
+def progress(text: str) -> None:
+    """One line of a long run's progress on stderr: a full-size scene's solves take an hour on a laptop's CPU."""
+    print(f"  {text}", file=sys.stderr, flush=True)
+
+
 def timed_solve(sim, fields: dict, marks=(), x0=None) -> tuple:
     """(result, seconds) of one solve on :attr:`Where.backend`, snapshots at ``marks``, from ``x0`` if given."""
     solver = Solver(sim.calibration, backend=Where.backend, settings=Settings(**fields))
@@ -118,7 +123,8 @@ def reference_run(sim, plan: dict, tau: float, algorithm: str, iters: int, cache
         stored = np.load(path, allow_pickle=False)
         return {"points": [dict(zip(stored["names"], map(float, row))) for row in stored["points"]],
                 "change": stored["history_change"].tolist()}
-    result, _ = timed_solve(sim, {"tv": tau, "iters": iters, "algorithm": algorithm}, reference_marks(iters))
+    result, seconds = timed_solve(sim, {"tv": tau, "iters": iters, "algorithm": algorithm}, reference_marks(iters))
+    progress(f"{plan['kind']}, {plan['level']}: {algorithm}'s reference, {iters} iterations in {seconds:.0f} s")
     points = curve(sim, result)
     names = list(points[0])
     np.savez(path, names=names, points=np.array([[p[n] for n in names] for p in points]), key=key,
@@ -282,7 +288,10 @@ def run_scene(plan: dict, shape, bands: int, iters: int, cache: Path, weight_fro
     margins."""
     sim = panel_scene(plan, shape, bands)
     today_result, today_seconds = timed_solve(sim, TODAY)
+    progress(f"{plan['kind']}, {plan['level']}: today's {today_result.iterations} iterations in {today_seconds:.0f} s")
     default_result, default_seconds = timed_solve(sim, {} if converge is None else {"converge": converge})
+    progress(f"{plan['kind']}, {plan['level']}: the default's {default_result.iterations} iterations "
+             f"({default_result.stop_reason}) in {default_seconds:.0f} s")
     tau = float((default_result if weight_from == "default" else today_result).attrs["tv_chosen"])
     runs = {a: reference_run(sim, plan, tau, a, iters, cache) for a in REFERENCE_ALGORITHMS}
     scene = {**plan, "tv": tau, "today": final_point(sim, today_result, today_seconds),
@@ -406,7 +415,7 @@ def chosen_scenes(parser, args, seed: int) -> list[tuple[int, dict]]:
 
 
 def scene_done(index: int, plan: dict, scenes: int):
-    print(f"  scene {index + 1}/{scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
+    progress(f"scene {index + 1}/{scenes} ({plan['kind']}, {plan['level']}) done")
 
 
 def main(argv=None) -> int:
