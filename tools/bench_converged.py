@@ -383,8 +383,8 @@ def plot(results: dict, path: Path, per_row: int = 5):
         axes[2 * (i // per_row), i % per_row].set_visible(False)
         axes[2 * (i // per_row) + 1, i % per_row].set_visible(False)
     axes[0, 0].legend(fontsize=7, framealpha=0.5)
-    fig.suptitle(f"Seed {results['seed']}, {results['size']}×{results['bands']}: error against time "
-                 "(grey: within the reference's tolerance)", fontsize=10)
+    fig.suptitle(f"Seed {results['seed']}, {results['size']}×{results['bands']}: error against time\n"
+                 "(grey: within the reference's tolerance)", fontsize=10)     # two lines: a panel of two is narrow
     fig.savefig(path, dpi=90)
 
 
