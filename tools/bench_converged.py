@@ -52,7 +52,7 @@ import numpy as np
 
 from admm_acceleration import ACCELERATIONS, accelerated
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text
-from bench_panel import panel_kinds, panel_scene, scene_plan
+from bench_panel import panel_kinds, panel_scene, progress, scene_done, scene_name, scene_plan
 from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
@@ -71,11 +71,6 @@ HISTORY = ("change", "data", "objective", "seconds")   # per-iteration numbers a
 def reference_marks(iters: int) -> list[int]:
     """Where a reference run's cube is scored: about 24 marks, log-spaced from 10 to ``iters``."""
     return sorted({int(round(m)) for m in np.geomspace(10, iters, 24)})
-
-
-def progress(text: str) -> None:
-    """One line of a long run's progress on stderr: a full-size scene's solves take an hour on a laptop's CPU."""
-    print(f"  {text}", file=sys.stderr, flush=True)
 
 
 def timed_solve(sim, fields: dict, marks=(), x0=None) -> tuple:
@@ -124,7 +119,7 @@ def reference_run(sim, plan: dict, tau: float, algorithm: str, iters: int, cache
         return {"points": [dict(zip(stored["names"], map(float, row))) for row in stored["points"]],
                 "change": stored["history_change"].tolist()}
     result, seconds = timed_solve(sim, {"tv": tau, "iters": iters, "algorithm": algorithm}, reference_marks(iters))
-    progress(f"{plan['kind']}, {plan['level']}: {algorithm}'s reference, {iters} iterations in {seconds:.0f} s")
+    progress(f"{scene_name(plan)}: {algorithm}'s reference, {iters} iterations in {seconds:.0f} s")
     points = curve(sim, result)
     names = list(points[0])
     np.savez(path, names=names, points=np.array([[p[n] for n in names] for p in points]), key=key,
@@ -288,9 +283,9 @@ def run_scene(plan: dict, shape, bands: int, iters: int, cache: Path, weight_fro
     margins."""
     sim = panel_scene(plan, shape, bands)
     today_result, today_seconds = timed_solve(sim, TODAY)
-    progress(f"{plan['kind']}, {plan['level']}: today's {today_result.iterations} iterations in {today_seconds:.0f} s")
+    progress(f"{scene_name(plan)}: today's {today_result.iterations} iterations in {today_seconds:.0f} s")
     default_result, default_seconds = timed_solve(sim, {} if converge is None else {"converge": converge})
-    progress(f"{plan['kind']}, {plan['level']}: the default's {default_result.iterations} iterations "
+    progress(f"{scene_name(plan)}: the default's {default_result.iterations} iterations "
              f"({default_result.stop_reason}) in {default_seconds:.0f} s")
     tau = float((default_result if weight_from == "default" else today_result).attrs["tv_chosen"])
     runs = {a: reference_run(sim, plan, tau, a, iters, cache) for a in REFERENCE_ALGORITHMS}
@@ -412,10 +407,6 @@ def chosen_scenes(parser, args, seed: int) -> list[tuple[int, dict]]:
     if not all(0 <= i < args.scenes for i in only):
         parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
     return [(i, plan) for i, plan in enumerate(scene_plan(args.scenes, seed, panel_kinds())) if not only or i in only]
-
-
-def scene_done(index: int, plan: dict, scenes: int):
-    progress(f"scene {index + 1}/{scenes} ({plan['kind']}, {plan['level']}) done")
 
 
 def main(argv=None) -> int:

@@ -40,6 +40,20 @@ ALSO = {"support-field": {"support_field": True}, "subspace": {"subspace": True}
         "algorithm admm": {"algorithm": "admm"}}
 
 
+def scene_name(plan: dict) -> str:
+    """A panel scene's kind and noise level, as the progress lines name it: "sparse, low light"."""
+    return f"{plan['kind']}, {plan['level']}"
+
+
+def progress(text: str) -> None:
+    """One line of a long run's progress on stderr (a full-size scene's solves take an hour on a laptop's CPU)."""
+    print(f"  {text}", file=sys.stderr, flush=True)
+
+
+def scene_done(index: int, plan: dict, scenes: int) -> None:
+    progress(f"scene {index + 1}/{scenes} ({scene_name(plan)}) done")
+
+
 def scene_plan(count: int, seed: int, kinds=tuple(KINDS)) -> list[dict]:
     """Scene i: its kind (``kinds`` in turn), noise level and own seed (from ``seed``'s SeedSequence)."""
     levels = list(LEVELS)
@@ -259,7 +273,7 @@ def main(argv=None) -> int:
         if args.only is not None and i != args.only:
             continue
         results["scenes"].append({"index": i, **run_scene(plan, args.size, args.bands, marks, args.sweep, args.also)})
-        print(f"  scene {i + 1}/{args.scenes} ({plan['kind']}, {plan['level']}) done", file=sys.stderr, flush=True)
+        scene_done(i, plan, args.scenes)
         save_json(out, "panel", results)
     report(out, "panel", results, markdown(results))
     plot(results, out / "panel.png")
