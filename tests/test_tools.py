@@ -20,6 +20,10 @@ import compare_recon  # noqa: E402
 import compare_speed  # noqa: E402
 import rank_signals  # noqa: E402
 import weight_oracles  # noqa: E402
+from clsdcam.metrics import psnr  # noqa: E402
+from clsdcam.solve.auto_weights import AUTO_AT  # noqa: E402
+from clsdcam.solve.settings import AUTO_CAP  # noqa: E402
+from clsdcam.solve.solver import Settings, Solver  # noqa: E402
 
 
 def test_bench_iteration_times_every_configuration_against_the_authors_and_the_fft_floor(tmp_path, capsys):
@@ -203,7 +207,7 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
     reference; the stop replayed at a huge tolerance stops where the estimate first exists, and so does the default
     run at that tolerance (--converge)."""
     monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
-    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise", "sparse"])
+    monkeypatch.setattr(bench_panel, "panel_kinds", lambda: ["piecewise", "sparse"])
     args = ["--size", "24x32", "--bands", "4", "--scenes", "2", "--seed", "3", "--reference-iters", "150",
             "--replay", "1e9", "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "a")]
     bench_converged.main(args)
@@ -249,7 +253,7 @@ ONE_PIECEWISE_SCENE = ["--size", "24x32", "--bands", "4", "--scenes", "1", "--se
 def piecewise_panel(monkeypatch):
     """bench_converged's panel drawn from the piecewise kind alone (no real cube needed)."""
     monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
-    monkeypatch.setattr(bench_converged, "panel_kinds", lambda: ["piecewise"])
+    monkeypatch.setattr(bench_panel, "panel_kinds", lambda: ["piecewise"])
 
 
 def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_path, capsys, piecewise_panel):
@@ -451,6 +455,26 @@ def test_bench_panel_replays_one_scene_and_judges_a_speed_option(tmp_path, capsy
     assert [title for title, _ in bench_panel.margin_panels(results)] == [          # no sweep: no empty panel
         "default against --no-skip, worst mark", "--support-field against --no-skip, worst mark"]
     assert (tmp_path / "curves.png").stat().st_size > 0
+
+
+def test_bench_panel_judges_each_run_at_its_own_stop_with_marks_auto(tmp_path, capsys, monkeypatch):
+    """``--marks auto``: every configuration, the sweep's weights too, runs to the default stop and is judged at its
+    final cube (the default's is the cube a plain default solve gives); ``--only I,J`` keeps those scenes."""
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    bench_panel.main(["--size", "24x32", "--bands", "8", "--scenes", "3", "--only", "0,2", "--marks", "auto",
+                      "--sweep", "3", "--seed", "7", "--out", str(tmp_path)])
+    results = json.loads((tmp_path / "panel.json").read_text())
+    assert results["marks"] == "auto" and [s["index"] for s in results["scenes"]] == [0, 2]
+    for scene in results["scenes"]:
+        for run in scene["runs"].values():
+            (point,) = run["points"]
+            assert run["stop_reason"] == "converged" and AUTO_AT < point["iteration"] < AUTO_CAP
+    plan = bench_panel.scene_plan(3, 7)[2]
+    sim = bench_panel.panel_scene(plan, (24, 32), 8)
+    plain = Solver(sim.calibration, settings=Settings()).solve(sim.measurement)
+    (own,) = results["scenes"][1]["runs"]["default"]["points"]
+    assert own["iteration"] == plain.iterations and own["psnr"] == pytest.approx(psnr(plain.cube, sim.truth), abs=1e-9)
+    assert "| 2 | sparse |" in capsys.readouterr().out and (tmp_path / "curves.png").stat().st_size > 0
 
 
 def test_bench_panel_judges_admm_at_a_third_of_the_iterations(tmp_path, capsys, monkeypatch):

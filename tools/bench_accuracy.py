@@ -30,6 +30,7 @@ from clsdcam.cli.options import WORK, size
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.sim import noiseless_measurement, shared_data_dir, simulate
 from clsdcam.sim.scenes import source_lines, source_positions
+from clsdcam.solve.settings import AUTO
 from clsdcam.solve.solver import Settings, Solver
 
 SCENES = ("target", "leds", "piecewise", "realcube", "sources", "lines")
@@ -58,15 +59,18 @@ def add_backend_option(parser: argparse.ArgumentParser) -> None:
 
 def solve(calibration, measurement, fields: dict, marks) -> tuple[dict, dict]:
     """{iteration: cube} at ``marks`` and the result's attributes (plus seconds per iteration), on
-    :attr:`Where.backend`."""
-    solver = Solver(calibration, backend=Where.backend, settings=Settings(iters=max(marks), **fields))
+    :attr:`Where.backend`; ``marks`` "auto": one solve to the default stop (``--iters auto``), {its iterations: its
+    final cube}, and why it stopped."""
+    to_stop = marks == AUTO
+    settings = Settings(**fields) if to_stop else Settings(iters=max(marks), **fields)
+    solver = Solver(calibration, backend=Where.backend, settings=settings)
     start = time.perf_counter()
-    result = solver.solve(measurement, snapshots=marks)
-    attrs = {key: result.attrs[key] for key in ("tv", "final_rank", "fft_work_saved", "noise_estimate")
+    result = solver.solve(measurement, snapshots=() if to_stop else marks)
+    attrs = {key: result.attrs[key] for key in ("tv", "final_rank", "fft_work_saved", "noise_estimate", "stop_reason")
              if key in result.attrs}
     attrs["tv_chosen"] = result.attrs.get("tv_chosen", result.attrs.get("tv"))
     attrs["seconds"] = time.perf_counter() - start
-    return result.snapshots, attrs
+    return ({result.iterations: result.cube} if to_stop else result.snapshots), attrs
 
 
 def scene_points(scene: str, sim, snapshots: dict) -> list[dict]:

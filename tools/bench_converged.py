@@ -52,7 +52,7 @@ import numpy as np
 
 from admm_acceleration import ACCELERATIONS, accelerated
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text
-from bench_panel import panel_kinds, panel_scene, progress, scene_done, scene_name, scene_plan
+from bench_panel import chosen_scenes, panel_scene, progress, scene_done, scene_name
 from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
@@ -398,15 +398,6 @@ def add_panel_options(parser, scenes: int, reference_iters: int, weight_from: st
     parser.add_argument("--cache", default=f"{WORK}/converged-cache", help="folder of cached reference runs")
     parser.add_argument("--weight-from", choices=tuple(WEIGHT_FROM), default=weight_from,
                         help=f"whose --tv auto choice is the scene's weight (default: {WEIGHT_FROM[weight_from]})")
-
-
-def chosen_scenes(parser, args, seed: int) -> list[tuple[int, dict]]:
-    """The panel's (index, plan) pairs that --only keeps (all without it); an index outside the panel is the
-    parser's error."""
-    only = {int(i) for i in args.only.split(",") if i}
-    if not all(0 <= i < args.scenes for i in only):
-        parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
-    return [(i, plan) for i, plan in enumerate(scene_plan(args.scenes, seed, panel_kinds())) if not only or i in only]
 
 
 def main(argv=None) -> int:

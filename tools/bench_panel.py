@@ -17,8 +17,10 @@ the default chose (``--sweep`` points, log-spaced). Per kind the table gives the
 marks, one line a configuration). ``--also support-field`` (or ``subspace``) judges that
 speed option by the same rule on every scene, ``--also 'algorithm admm'`` the other algorithm, at the same marks and
 at a third of them (its PSNR at mark m/3 against ``--no-skip``'s at m, for the marks that have their third);
-``--only I`` replays scene I of a panel alone. Without real cubes
-in ``../shared/data`` the ``real`` kind is left out (said on stderr).
+``--only I,J`` replays some scenes of a panel. ``--marks auto`` runs every configuration, the sweep's weights
+included, to the default stop (``--iters auto``) and judges each at its own final cube: the weight's rule at
+convergence, where the stop, not a mark, ends each run. Without real cubes in ``../shared/data`` the ``real`` kind
+is left out (said on stderr).
 """
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ from bench_accuracy import (ANGLE_MARGIN_DEG, PSNR_MARGIN_DB, Where, add_backend
 from clsdcam.render import new_figure
 from clsdcam.sim import band_wavelengths, shared_data_dir, simulate
 from clsdcam.sim.kinds import KINDS, make_kind, real_cubes
+from clsdcam.solve.settings import AUTO
 
 LEVELS = {"standard": {"noise_var": 1e-5, "photons": 2e4}, "low light": {"noise_var": 1e-4, "photons": 2e3}}
 SWEEP_PSNR_DB, SWEEP_ANGLE_DEG = 0.5, 1.0
@@ -75,6 +78,15 @@ def sweep_weights(chosen: float, points: int) -> list[float]:
     return [float(chosen * 10.0 ** e) for e in np.linspace(-1.0, 1.0, points)]
 
 
+def chosen_scenes(parser, args, seed: int) -> list[tuple[int, dict]]:
+    """The panel's (index, plan) pairs that --only keeps (all without it); an index outside the panel is the
+    parser's error."""
+    only = {int(i) for i in args.only.split(",") if i}
+    if not all(0 <= i < args.scenes for i in only):
+        parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
+    return [(i, plan) for i, plan in enumerate(scene_plan(args.scenes, seed, panel_kinds())) if not only or i in only]
+
+
 def panel_scene(plan: dict, shape, bands: int):
     """The simulation of one planned scene: its kind's cube, the simulator's camera and noise, all from its seed."""
     cube = make_kind(plan["kind"], shape, band_wavelengths(bands), plan["seed"])
@@ -88,7 +100,7 @@ def run_scene(plan: dict, shape, bands: int, marks, points: int, also=()) -> dic
     for name, fields in {"default": {}, "--no-skip": {"skip": False}, **{f"--{a}": ALSO[a] for a in also}}.items():
         runs[name] = run(sim, fields, marks)
     for tau in sweep_weights(runs["default"]["tv_chosen"], points) if points else ():
-        runs[f"--tv {tau:.3g}"] = run(sim, {"tv": tau}, marks[-1:])
+        runs[f"--tv {tau:.3g}"] = run(sim, {"tv": tau}, marks if marks == AUTO else marks[-1:])
     return {**plan, "runs": runs}
 
 
@@ -235,8 +247,9 @@ def plot_curves(results: dict, path: Path, per_row: int = 5):
         bottom.set(xlabel="iterations", ylabel="mean spectral angle (°)")
         for ax in (top, bottom):
             ax.set_xscale("log")
-            ax.set_xticks(results["marks"], [str(m) for m in results["marks"]], fontsize=7)
-            ax.minorticks_off()
+            if results["marks"] != AUTO:
+                ax.set_xticks(results["marks"], [str(m) for m in results["marks"]], fontsize=7)
+                ax.minorticks_off()
     for i in range(len(scenes), rows * columns):
         axes[2 * (i // per_row), i % per_row].set_visible(False)
         axes[2 * (i // per_row) + 1, i % per_row].set_visible(False)
@@ -250,28 +263,25 @@ def main(argv=None) -> int:
     parser = panel_parser(__doc__.splitlines()[0], "panel", named_scenes=False)
     parser.set_defaults(size=(128, 160))
     parser.add_argument("--scenes", type=int, default=20, help="random scenes (kinds in turn; default 20)")
-    parser.add_argument("--marks", default="50,100,300")
+    parser.add_argument("--marks", default="50,100,300",
+                        help="the iterations judged (auto: every run to the default stop, judged at its final cube)")
     parser.add_argument("--sweep", type=int, default=5, help="fixed weights a decade either side (0: no sweep)")
     parser.add_argument("--seed", type=int, default=None, help="replay a panel (default: fresh entropy)")
-    parser.add_argument("--only", type=int, default=None, metavar="I", help="replay scene I of the panel alone")
+    parser.add_argument("--only", default="", metavar="I[,J...]", help="these scenes of the panel alone")
     parser.add_argument("--also", action="append", choices=list(ALSO), default=[],
                         help="also judge this speed option by the rule, on every scene (repeatable)")
     add_backend_option(parser)
     args = parser.parse_args(argv)
     Where.use(args.backend)
-    if args.only is not None and not 0 <= args.only < args.scenes:
-        parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
-    kinds = panel_kinds()
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
-    marks = sorted(int(m) for m in args.marks.split(","))
+    chosen = chosen_scenes(parser, args, seed)
+    marks = AUTO if args.marks == AUTO else sorted(int(m) for m in args.marks.split(","))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "marks": marks, "also": args.also,
                "backend": args.backend, "scenes": []}
     print(f"panel seed {seed}", file=sys.stderr, flush=True)
-    for i, plan in enumerate(scene_plan(args.scenes, seed, kinds)):
-        if args.only is not None and i != args.only:
-            continue
+    for i, plan in chosen:
         results["scenes"].append({"index": i, **run_scene(plan, args.size, args.bands, marks, args.sweep, args.also)})
         scene_done(i, plan, args.scenes)
         save_json(out, "panel", results)

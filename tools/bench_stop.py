@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from bench_accuracy import Where, add_backend_option, panel_parser, report, size_text
-from bench_converged import (REFERENCE_ALGORITHMS, add_panel_options, chosen_scenes, reference, reference_cube,
-                             reference_run, scene_weight, settled_within, timed_solve, within)
-from bench_panel import panel_scene, scene_done
+from bench_converged import (REFERENCE_ALGORITHMS, add_panel_options, reference, reference_cube, reference_run,
+                             scene_weight, settled_within, timed_solve, within)
+from bench_panel import chosen_scenes, panel_scene, scene_done
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
 from clsdcam.solve.convergence import WINDOW, DistanceEstimate
