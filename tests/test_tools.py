@@ -598,6 +598,24 @@ def test_compare_speed_pairs_two_checkouts_and_refuses_a_folder_without_one(tmp_
         compare_speed.main([str(tmp_path), "--pairs", "1"])
 
 
+PANEL_TOOLS = (bench_panel, bench_converged, bench_stop)     # with --scenes: an index past the panel is refused too
+
+
+@pytest.mark.parametrize("tool, only", [(tool, only) for tool in (*PANEL_TOOLS, weight_oracles)
+                                        for only in ("a", "1.5", "-1", ",", "0,x")] +
+                         [(tool, "7") for tool in PANEL_TOOLS])
+def test_panel_tools_refuse_an_only_that_names_no_scene_of_the_panel(tmp_path, capsys, tool, only):
+    """--only must list whole scene indices from 0, within the panel where the tool has --scenes: anything else
+    is one line on stderr, exit 2, before a scene runs or a folder is made."""
+    panel = ["--scenes", "3"] if tool in PANEL_TOOLS else []
+    with pytest.raises(SystemExit) as stop:
+        tool.main(["--size", "24x32", "--bands", "8", *panel, "--seed", "7", "--only", only,
+                   "--out", str(tmp_path / "out")])
+    errors = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]
+    assert stop.value.code == 2 and len(errors) == 1 and "--only" in errors[0]
+    assert not (tmp_path / "out").exists()
+
+
 def test_bench_panel_on_opencl_gives_numpys_figures(tmp_path, monkeypatch):
     """``--backend opencl``: every solve of one replayed scene (FISTA and ADMM) runs on one OpenCL backend made for
     the run, recorded as such, and its PSNRs and angles equal NumPy's to 1e-3."""

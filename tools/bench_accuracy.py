@@ -57,19 +57,26 @@ def add_backend_option(parser: argparse.ArgumentParser) -> None:
                         help="where every solve runs (opencl: the device clsdcam picks; PYOPENCL_CTX names another)")
 
 
+def timed_run(calibration, measurement, fields: dict, marks=(), x0=None) -> tuple:
+    """(result, seconds) of one solve with ``Settings(**fields)`` on :attr:`Where.backend`, snapshots at ``marks``,
+    from ``x0`` if given; the seconds the solve's alone (the solver's set-up left out)."""
+    solver = Solver(calibration, backend=Where.backend, settings=Settings(**fields))
+    start = time.perf_counter()
+    result = solver.solve(measurement, x0=x0, snapshots=marks)
+    return result, time.perf_counter() - start
+
+
 def solve(calibration, measurement, fields: dict, marks) -> tuple[dict, dict]:
     """{iteration: cube} at ``marks`` and the result's attributes (plus seconds per iteration), on
     :attr:`Where.backend`; ``marks`` "auto": one solve to the default stop (``--iters auto``), {its iterations: its
     final cube}, and why it stopped."""
     to_stop = marks == AUTO
-    settings = Settings(**fields) if to_stop else Settings(iters=max(marks), **fields)
-    solver = Solver(calibration, backend=Where.backend, settings=settings)
-    start = time.perf_counter()
-    result = solver.solve(measurement, snapshots=() if to_stop else marks)
+    result, seconds = timed_run(calibration, measurement, fields if to_stop else dict(fields, iters=max(marks)),
+                                () if to_stop else marks)
     attrs = {key: result.attrs[key] for key in ("tv", "final_rank", "fft_work_saved", "noise_estimate", "stop_reason")
              if key in result.attrs}
     attrs["tv_chosen"] = result.attrs.get("tv_chosen", result.attrs.get("tv"))
-    attrs["seconds"] = time.perf_counter() - start
+    attrs["seconds"] = seconds
     return ({result.iterations: result.cube} if to_stop else result.snapshots), attrs
 
 

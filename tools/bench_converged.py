@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import hashlib
 import sys
-import time
 from contextlib import contextmanager
 from importlib import import_module
 from pathlib import Path
@@ -51,15 +50,15 @@ from pathlib import Path
 import numpy as np
 
 from admm_acceleration import ACCELERATIONS, accelerated
-from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text
-from bench_panel import chosen_scenes, panel_scene, progress, scene_done, scene_name
+from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text, timed_run
+from bench_panel import chosen_scenes, panel_scene, scene_indices, progress, scene_done, scene_name
 from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
 from clsdcam.solve.auto_weights import AUTO_AT
 from clsdcam.solve.convergence import DistanceEstimate
-from clsdcam.solve.solver import Settings, Solver
+from clsdcam.solve.solver import Settings
 
 PSNR_DB, ANGLE_DEG = 0.2, 0.5           # rule 2's tolerance (and rule 4's)
 TIME_MEDIAN, TIME_WORST = 1.0, 2.0      # rule 3
@@ -74,11 +73,8 @@ def reference_marks(iters: int) -> list[int]:
 
 
 def timed_solve(sim, fields: dict, marks=(), x0=None) -> tuple:
-    """(result, seconds) of one solve on :attr:`Where.backend`, snapshots at ``marks``, from ``x0`` if given."""
-    solver = Solver(sim.calibration, backend=Where.backend, settings=Settings(**fields))
-    start = time.perf_counter()
-    result = solver.solve(sim.measurement, x0=x0, snapshots=marks)
-    return result, time.perf_counter() - start
+    """:func:`bench_accuracy.timed_run` on a simulated scene: (result, seconds)."""
+    return timed_run(sim.calibration, sim.measurement, fields, marks, x0)
 
 
 def final_point(sim, result, seconds: float) -> dict:
@@ -305,7 +301,7 @@ def summary(results: dict) -> list[str]:
             f"- time against today's 300 FISTA iterations: median {np.median(ratios):.2f}×, worst {max(ratios):.2f}× "
             f"(rule: ≤ {TIME_MEDIAN}×, ≤ {TIME_WORST}×)",
             f"- no regression against today: {kept} of {len(scenes)} scenes",
-            f"- FISTA's own time to the reference's tolerance over the default's: median "
+            "- FISTA's own time to the reference's tolerance over the default's: median "
             + (f"{np.median(speedups):.2f}× ({len(speedups)} scenes where FISTA got there)" if speedups else "–")]
 
 
@@ -392,7 +388,7 @@ def add_panel_options(parser, scenes: int, reference_iters: int, weight_from: st
     parser.add_argument("--scenes", type=int, default=scenes, help=f"random scenes (kinds in turn; default {scenes})")
     parser.add_argument("--seed", type=int, default=None, required=seed_required,
                         help="the panel" + ("" if seed_required else " to replay (default: fresh entropy)"))
-    parser.add_argument("--only", default="", metavar="I[,J...]", help="these scenes of the panel alone")
+    parser.add_argument("--only", type=scene_indices, metavar="I[,J...]", help="these scenes of the panel alone")
     parser.add_argument("--reference-iters", type=int, default=reference_iters,
                         help=f"each reference run's iterations (default {reference_iters})")
     parser.add_argument("--cache", default=f"{WORK}/converged-cache", help="folder of cached reference runs")

@@ -24,6 +24,7 @@ is left out (said on stderr).
 """
 from __future__ import annotations
 
+import argparse
 import sys
 from functools import partial
 from pathlib import Path
@@ -78,12 +79,24 @@ def sweep_weights(chosen: float, points: int) -> list[float]:
     return [float(chosen * 10.0 ** e) for e in np.linspace(-1.0, 1.0, points)]
 
 
+def scene_indices(text: str) -> list[int]:
+    """--only's value, "I,J,…", as scene indices in the order given (an argparse type: anything else is the
+    parser's one-line error)."""
+    try:
+        indices = [int(i) for i in text.split(",") if i.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: scene indices are whole numbers, e.g. 5,6,9") from None
+    if not indices or min(indices) < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: scene indices are whole numbers from 0, e.g. 5,6,9")
+    return indices
+
+
 def chosen_scenes(parser, args, seed: int) -> list[tuple[int, dict]]:
     """The panel's (index, plan) pairs that --only keeps (all without it); an index outside the panel is the
     parser's error."""
-    only = {int(i) for i in args.only.split(",") if i}
-    if not all(0 <= i < args.scenes for i in only):
-        parser.error(f"--only {args.only}: the panel has scenes 0 … {args.scenes - 1}")
+    only = set(args.only or ())
+    if not all(i < args.scenes for i in only):
+        parser.error(f"--only {','.join(map(str, args.only))}: the panel has scenes 0 … {args.scenes - 1}")
     return [(i, plan) for i, plan in enumerate(scene_plan(args.scenes, seed, panel_kinds())) if not only or i in only]
 
 
@@ -267,7 +280,7 @@ def main(argv=None) -> int:
                         help="the iterations judged (auto: every run to the default stop, judged at its final cube)")
     parser.add_argument("--sweep", type=int, default=5, help="fixed weights a decade either side (0: no sweep)")
     parser.add_argument("--seed", type=int, default=None, help="replay a panel (default: fresh entropy)")
-    parser.add_argument("--only", default="", metavar="I[,J...]", help="these scenes of the panel alone")
+    parser.add_argument("--only", type=scene_indices, metavar="I[,J...]", help="these scenes of the panel alone")
     parser.add_argument("--also", action="append", choices=list(ALSO), default=[],
                         help="also judge this speed option by the rule, on every scene (repeatable)")
     add_backend_option(parser)

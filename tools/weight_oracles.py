@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from bench_accuracy import panel_parser, save_json
-from bench_panel import panel_kinds, panel_scene, scene_plan, sweep_weights
+from bench_panel import panel_kinds, panel_scene, scene_indices, scene_plan, sweep_weights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.camera.model import ForwardModel
@@ -98,12 +98,12 @@ def main(argv=None) -> int:
     parser = panel_parser(__doc__.splitlines()[0], "oracles", named_scenes=False)
     parser.set_defaults(size=(128, 160))
     parser.add_argument("--seed", type=int, required=True, help="the panel's seed")
-    parser.add_argument("--only", required=True, help="the panel's scene indices, e.g. 5,6,9")
+    parser.add_argument("--only", type=scene_indices, required=True, help="the panel's scene indices, e.g. 5,6,9")
     parser.add_argument("--iters", type=int, default=300)
     parser.add_argument("--sweep", type=int, default=5, help="fixed weights a decade either side")
     parser.add_argument("--cg", type=int, default=100, help="conjugate-gradient steps per projection")
     args = parser.parse_args(argv)
-    indices = [int(i) for i in args.only.split(",")]
+    indices = args.only
     plans = scene_plan(max(indices) + 1, args.seed, panel_kinds())
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
