@@ -173,8 +173,8 @@ class Splitting(SplittingBase):
         shift = self.nonneg_shift()
         np.subtract(q, shift, out=new) if shift else np.copyto(new, q)
         np.maximum(new, 0, out=new)
-        old -= new
-        step = float(np.vdot(old.ravel(), old.ravel()))
+        change = np.subtract(old, new, out=scratch_buffer(scratch, "change", q.shape, q.dtype))
+        step = float(np.vdot(change.ravel(), change.ravel()))    # contiguous: ravel is a view, not a copy
         old[...] = new
         rho = np.subtract(q, new, out=state.rho[:, y0:y1])
         rest = np.subtract(new, rho, out=state.rest[:, y0:y1])
