@@ -147,13 +147,13 @@ def best_fixed(scene: dict) -> tuple[str, dict] | None:
     return max(fixed, key=lambda item: item[1]["points"][-1]["psnr"]) if fixed else None
 
 
-def sweep_margins(scene: dict) -> tuple[float, float] | None:
-    """(PSNR margin dB, angle margin °) of the default's weight against the sweep's best fixed weight (by PSNR)
-    at the last mark; None without a sweep."""
+def sweep_margins(scene: dict, name: str = "default") -> tuple[float, float] | None:
+    """(PSNR margin dB, angle margin °) of run ``name``'s weight (the default's) against the sweep's best fixed
+    weight (by PSNR) at the last mark; None without a sweep."""
     found = best_fixed(scene)
     if found is None:
         return None
-    best, own = found[1], scene["runs"]["default"]["points"][-1]
+    best, own = found[1], scene["runs"][name]["points"][-1]
     return (own["psnr"] - best["points"][-1]["psnr"] + SWEEP_PSNR_DB,
             best["points"][-1]["angle"] - own["angle"] + SWEEP_ANGLE_DEG)
 
