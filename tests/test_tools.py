@@ -601,15 +601,17 @@ def test_compare_speed_pairs_two_checkouts_and_refuses_a_folder_without_one(tmp_
 
 def sweep_scene(index: int, level: str, tau: float, finals: list[tuple[float, float]]) -> dict:
     """A panel scene whose 3-point sweep (0.1τ, τ, 10τ) ends at ``finals`` (PSNR, angle)."""
-    runs = {"default": {"tv_chosen": tau, "points": [{"iteration": 400, "psnr": finals[1][0], "angle": finals[1][1]}]}}
+    chosen = [{"iteration": 400, "psnr": finals[1][0], "angle": finals[1][1]}]
+    runs = {"default": {"tv_chosen": tau, "points": chosen}, "--no-skip": {"points": chosen}}
     for m, (db, deg) in zip((0.1, 1.0, 10.0), finals):
         runs[f"--tv {m * tau:.3g}"] = {"points": [{"iteration": 400, "psnr": db, "angle": deg}]}
     return {"index": index, "kind": "piecewise", "level": level, "runs": runs}
 
 
 def test_weight_factors_counts_the_scenes_each_multiple_of_the_chosen_weight_passes(tmp_path, capsys):
-    """Per sweep multiple, the scenes where that fixed weight is within 0.5 dB and 1° of the sweep's best; a
-    later file's scene replaces an earlier one's; --low-light takes τ in standard light and its multiple in low."""
+    """Every scene's check of the chosen weight, then per sweep multiple the scenes where that fixed weight is
+    within 0.5 dB and 1° of the sweep's best; a later file's scene replaces an earlier one's; --low-light takes τ in
+    standard light and its multiple in low."""
     first = {"scenes": [sweep_scene(0, "standard", 1e-3, [(20.0, 9.0), (25.0, 9.0), (24.6, 9.5)]),
                         sweep_scene(1, "low light", 3e-3, [(30.0, 5.0), (30.0, 5.0), (30.0, 5.0)])]}
     second = {"scenes": [sweep_scene(1, "low light", 3e-3, [(10.0, 40.0), (22.0, 20.0), (23.0, 18.0)])]}
@@ -617,8 +619,12 @@ def test_weight_factors_counts_the_scenes_each_multiple_of_the_chosen_weight_pas
     for path, panel in zip(paths, (first, second)):
         path.write_text(json.dumps(panel))
     assert weight_factors.main([*map(str, paths), "--low-light", "10"]) == 0
-    rows = capsys.readouterr().out.splitlines()[2:]
-    assert rows == ["| ×0.1 | 0 of 2 | 0, 1 |",
+    scenes, factors = (table.splitlines()[2:] for table in capsys.readouterr().out.split("\n\n"))
+    assert scenes == ["| 0 | piecewise | standard | 0.001 | 25.00 dB / 9.00° (400) | 25.00 dB / 9.00° (400) | "
+                      "×1: 25.00 dB / 9.00° (400) | +0.50 dB / +1.00° |",
+                      "| 1 | piecewise | low light | 0.003 | 22.00 dB / 20.00° (400) | 22.00 dB / 20.00° (400) | "
+                      "×10: 23.00 dB / 18.00° (400) | **-0.50 dB / -1.00°** |"]
+    assert factors == ["| ×0.1 | 0 of 2 | 0, 1 |",
                     "| ×1 | 1 of 2 | 1 |",          # scene 1 (second file): 1 dB under 10τ
                     "| ×10 | 2 of 2 | – |",         # scene 0: 0.4 dB under τ, angle 0.5° worse: within the rule
                     "| ×1 in standard light, ×10 in low light | 2 of 2 | – |"]
