@@ -76,6 +76,8 @@ def platform_environment(platform: Platform, folder: Path) -> dict[str, str]:
     tests/test_parity.py runs on; fail when installed but not listed)."""
     if platform.implementation == "pocl" and default_platform() == platform.platform:
         pytest.skip("PoCL is this process's device: tests/test_parity.py runs its parity (both paths)")
+    if platform.implementation == "pocl" and (reason := pocl_build_failure()):
+        pytest.skip(f"PoCL cannot compile on this machine's CPU ({reason}); the other platforms run the parity")
     if platform.implementation != "pocl" and cl_icd.library(platform.implementation) is None:
         pytest.skip(f"{platform.platform} is not installed: {cl_icd.INSTALL[platform.implementation]}")
     env = {**os.environ, **cl_icd.vendors_environment(folder), "PYOPENCL_CTX": platform.platform, **platform.env}
@@ -97,6 +99,14 @@ def default_platform() -> str | None:
         return cl_devices.choose_device().platform.name.strip()
     except InputError:
         return None
+
+
+def pocl_build_failure() -> str:
+    """Why this process's PoCL device cannot build a kernel ("" when it can, or when PoCL is not listed here)."""
+    from clsdcam.backends import cl_devices
+
+    pocl = [d for p, d in cl_devices.all_devices() if p.name.strip() == "Portable Computing Language"]
+    return cl_devices.build_failure(pocl[0]) if pocl else ""
 
 
 def outcomes(junit: Path) -> dict[str, str]:

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import opencl_device
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import admm_acceleration  # noqa: E402
@@ -156,7 +157,7 @@ def test_rank_signals_counts_round_off_as_zero_and_needs_two_eigenvalues_per_gap
 
 @pytest.mark.opencl
 def test_bench_kernels_runs_every_row_on_opencl_and_numpy(tmp_path):
-    pytest.importorskip("pyopencl")
+    opencl_device()
     import bench_kernels
 
     out = tmp_path / "kernels.json"
@@ -573,7 +574,7 @@ def test_bench_breakdown_splits_every_configuration_and_sets_the_fft_floor_besid
 
 
 def test_bench_breakdown_on_opencl_finishes_the_queue_and_leaves_the_host_floor_out(tmp_path, capsys):
-    pytest.importorskip("pyopencl")
+    opencl_device()
     out = tmp_path / "b.json"
     assert bench_breakdown.main(["--backend", "opencl", "--size", "24x32", "--bands", "8", "--iters", "20",
                                  "--ranks", "", "--json", str(out)]) == 0

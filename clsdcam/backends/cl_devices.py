@@ -1,8 +1,12 @@
 """OpenCL devices: listing, choosing by name, one context and queue per device (a bounded cache).
 
-Every failure a user can meet here (no pyopencl, no driver, no matching device, no fp64,
-too little memory) is an :class:`~clsdcam.errors.InputError` with one line saying what
+Every failure a user can meet here (no pyopencl, no driver, no matching device, a device whose compiler cannot
+build here, no fp64, too little memory) is an :class:`~clsdcam.errors.InputError` with one line saying what
 to do, so the CLI prints it and exits with code 2.
+
+A device is chosen only if it builds a one-line probe kernel (:func:`build_failure`). The PoCL bundled with
+pyopencl's wheels (3.0, LLVM 14) lists the CPU of an AMD Zen 5 machine but cannot compile for it: LLVM 14 does
+not know CPU family 26, calls it "generic", and rejects that name ("unknown target CPU 'generic'").
 """
 from __future__ import annotations
 
@@ -101,23 +105,48 @@ def choose_device(substring: str | None = None):
     With ``substring``: the first device whose platform or device name contains it
     (case-insensitive), else InputError listing the devices. Without: the PYOPENCL_CTX
     choice when that variable is set, else the first GPU, else the first CPU, else the first device
-    (:func:`is_gpu`, :func:`is_cpu`).
+    (:func:`is_gpu`, :func:`is_cpu`), of those that build the probe kernel. A named device that cannot build,
+    or no device that can, is an InputError giving the compiler's reason.
     """
     devices = all_devices()
     if substring:
         needle = substring.lower()
         for platform, device in devices:
             if needle in platform.name.lower() or needle in device.name.lower():
-                return device
+                return buildable(device)
         names = "; ".join(describe(d) for _, d in devices)
         raise InputError(f"--device {substring!r}: no OpenCL device matches; available: {names}")
     if os.environ.get("PYOPENCL_CTX"):
         return _pyopencl_ctx_device()
-    for wanted in (is_gpu, is_cpu):
-        for _, device in devices:
-            if wanted(device):
-                return device
-    return devices[0][1]
+    usable = [device for _, device in devices if not build_failure(device)]
+    if not usable:
+        buildable(devices[0][1])
+    return next((device for wanted in (is_gpu, is_cpu) for device in usable if wanted(device)), usable[0])
+
+
+PROBE_KERNEL = "__kernel void probe(__global float *a) { a[get_global_id(0)] = 1.0f; }"
+
+
+@lru_cache(maxsize=None)
+def build_failure(device) -> str:
+    """Why ``device``'s compiler cannot build the probe kernel (its first error line), or "" when it can; once
+    per device and process."""
+    cl = import_pyopencl()
+    try:
+        cl.Program(cl.Context([device]), PROBE_KERNEL).build()
+    except cl.Error as exc:
+        lines = [line.strip() for line in str(exc).splitlines() if line.strip().startswith("error")]
+        return (lines or [str(exc).splitlines()[0]])[0]
+    return ""
+
+
+def buildable(device):
+    """``device``, or InputError when its compiler cannot build here."""
+    reason = build_failure(device)
+    if reason:
+        raise InputError(f"OpenCL device {describe(device)} cannot compile kernels on this machine ({reason}); "
+                         f"use --backend numpy, or another OpenCL driver (clsdcam devices lists them)")
+    return device
 
 
 def find_gpu():
@@ -133,9 +162,10 @@ def find_gpu():
 def _pyopencl_ctx_device():
     cl = import_pyopencl()
     try:
-        return cl.create_some_context(interactive=False).devices[0]
+        device = cl.create_some_context(interactive=False).devices[0]
     except Exception as exc:  # noqa: BLE001 - pyopencl raises several types for a bad PYOPENCL_CTX
         raise InputError(f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']!r}: {exc}") from exc
+    return buildable(device)
 
 
 @lru_cache(maxsize=CONTEXT_CACHE)
