@@ -122,6 +122,7 @@ def fake_opencl(monkeypatch, *kinds: str):
                for kind in kinds]
     monkeypatch.setattr(cl_devices, "import_pyopencl", lambda: SimpleNamespace(device_type=device_type))
     monkeypatch.setattr(cl_devices, "all_devices", lambda: devices)
+    monkeypatch.setattr(cl_devices, "build_failure", lambda device: "")      # every fake device compiles
     monkeypatch.delenv("PYOPENCL_CTX", raising=False)
 
 

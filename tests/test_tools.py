@@ -169,8 +169,8 @@ def test_bench_kernels_runs_every_row_on_opencl_and_numpy(tmp_path):
 
 @pytest.mark.opencl
 def test_check_vkfft_plans_counts_wrong_plans_per_shape(capsys):
-    pytest.importorskip("pyopencl")
     pytest.importorskip("pyvkfft")
+    opencl_device()
     import check_vkfft_plans
 
     check_vkfft_plans.main(["--shapes", "2x21x35,1x8x47", "--plans", "2"])
@@ -652,7 +652,7 @@ def test_panel_tools_refuse_an_only_that_names_no_scene_of_the_panel(tmp_path, c
 def test_bench_panel_on_opencl_gives_numpys_figures(tmp_path, monkeypatch):
     """``--backend opencl``: every solve of one replayed scene (FISTA and ADMM) runs on one OpenCL backend made for
     the run, recorded as such, and its PSNRs and angles equal NumPy's to 1e-3."""
-    pytest.importorskip("pyopencl")
+    opencl_device()
     monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
     monkeypatch.setattr(bench_accuracy.Where, "backend", "numpy")
     runs = {}
