@@ -110,8 +110,12 @@ def code_paths(platform: Platform) -> str:
 def pocl_build_failure() -> str:
     """Why this process's PoCL device cannot build a kernel ("" when it can, or when PoCL is not listed here)."""
     from clsdcam.backends import cl_devices
+    from clsdcam.errors import InputError
 
-    pocl = [d for p, d in cl_devices.all_devices() if p.name.strip() == "Portable Computing Language"]
+    try:
+        pocl = [d for p, d in cl_devices.all_devices() if p.name.strip() == "Portable Computing Language"]
+    except InputError:
+        return ""
     return cl_devices.build_failure(pocl[0]) if pocl else ""
 
 
