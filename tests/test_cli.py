@@ -154,45 +154,6 @@ def test_devices_without_an_opencl_driver_says_so_and_that_auto_runs_numpy(monke
     assert lines[-1] == "backend: numpy (auto: no OpenCL GPU)"
 
 
-def fake_devices(monkeypatch, failures: dict[str, str]) -> None:
-    """Two CPU devices whose probe builds fail or not by ``failures`` (device name -> compiler error, "" builds)."""
-    pytest.importorskip("pyopencl")
-    import pyopencl as cl
-
-    from clsdcam.backends import cl_devices
-
-    class Named:
-        def __init__(self, name, platform=None):
-            self.name, self.platform, self.type = name, platform, cl.device_type.CPU
-
-    devices = [(Named(p), Named(d, Named(p))) for p, d in (("Portable Computing Language", "pthread-CPU"),
-                                                           ("Intel(R) OpenCL", "Intel CPU"))]
-    monkeypatch.setattr(cl_devices, "all_devices", lambda: devices)
-    monkeypatch.setattr(cl_devices, "build_failure", lambda device: failures[device.name])
-    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
-
-
-def test_a_device_whose_compiler_fails_here_is_passed_over_for_one_that_builds(monkeypatch):
-    """PoCL 3.0's LLVM 14 lists a Zen 5 CPU but cannot compile for it: the next device that builds is chosen."""
-    from clsdcam.backends import cl_devices
-
-    fake_devices(monkeypatch, {"pthread-CPU": "error: unknown target CPU 'generic'", "Intel CPU": ""})
-    assert cl_devices.choose_device().name == "Intel CPU"
-
-
-@pytest.mark.parametrize("named", [None, "pthread"])
-def test_no_device_that_builds_is_one_line_saying_why(monkeypatch, named):
-    from clsdcam.backends import cl_devices
-    from clsdcam.errors import InputError
-
-    fake_devices(monkeypatch, {"pthread-CPU": "error: unknown target CPU 'generic'",
-                               "Intel CPU": "error: no compiler"})
-    with pytest.raises(InputError, match="pthread-CPU .*cannot compile kernels on this machine "
-                                         r"\(error: unknown target CPU 'generic'\); use --backend numpy") as raised:
-        cl_devices.choose_device(named)
-    assert "\n" not in str(raised.value)
-
-
 def every_help_command() -> list[list[str]]:
     """Every command and sub-choice, as the argument list that asks for its help."""
     from clsdcam.cli.analyze import ANALYSES

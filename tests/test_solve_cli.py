@@ -114,16 +114,34 @@ def test_without_save_on_interrupt_nothing_is_written(scenes, tmp_path, monkeypa
 
 
 # ---- defect 11: --backend auto (the default) -----------------------------------------------------------------------
-def fake_opencl(monkeypatch, *kinds: str):
-    """OpenCL as pyopencl would show it, with one device of each kind ("CPU", "GPU"): no real pyopencl needed."""
+def fake_opencl(monkeypatch, *kinds: str, failures: dict[str, str] | None = None):
+    """OpenCL as pyopencl would show it, with one device of each kind ("CPU", "GPU"): no real pyopencl needed. Each
+    compiles, but those ``failures`` names ("Fake GPU" -> the compiler's error)."""
     device_type = SimpleNamespace(CPU=2, GPU=4)
     platform = SimpleNamespace(name="Fake OpenCL")
     devices = [(platform, SimpleNamespace(type=getattr(device_type, kind), name=f"Fake {kind}", platform=platform))
                for kind in kinds]
     monkeypatch.setattr(cl_devices, "import_pyopencl", lambda: SimpleNamespace(device_type=device_type))
     monkeypatch.setattr(cl_devices, "all_devices", lambda: devices)
-    monkeypatch.setattr(cl_devices, "build_failure", lambda device: "")      # every fake device compiles
+    monkeypatch.setattr(cl_devices, "build_failure", lambda device: (failures or {}).get(device.name, ""))
     monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+
+
+def test_a_device_whose_compiler_fails_here_is_passed_over_for_one_that_builds(monkeypatch):
+    """PoCL 3.0's LLVM 14 lists a Zen 5 CPU but cannot compile for it: the next device that builds is chosen, even
+    where the one that cannot is the preferred kind."""
+    fake_opencl(monkeypatch, "GPU", "CPU", failures={"Fake GPU": "error: unknown target CPU 'generic'"})
+    assert cl_devices.choose_device().name == "Fake CPU"
+
+
+@pytest.mark.parametrize("named", [None, "GPU"])
+def test_no_device_that_builds_is_one_line_saying_why(monkeypatch, named):
+    fake_opencl(monkeypatch, "GPU", "CPU", failures={"Fake GPU": "error: unknown target CPU 'generic'",
+                                                     "Fake CPU": "error: no compiler"})
+    with pytest.raises(InputError, match=r"Fake GPU \(Fake OpenCL\) cannot compile kernels on this machine "
+                                         r"\(error: unknown target CPU 'generic'\); use --backend numpy") as raised:
+        cl_devices.choose_device(named)
+    assert "\n" not in str(raised.value)
 
 
 def test_auto_is_numpy_here_and_gives_numpys_cube(scenes, tmp_path, capsys):

@@ -118,10 +118,8 @@ def choose_device(substring: str | None = None):
         raise InputError(f"--device {substring!r}: no OpenCL device matches; available: {names}")
     if os.environ.get("PYOPENCL_CTX"):
         return _pyopencl_ctx_device()
-    usable = [device for _, device in devices if not build_failure(device)]
-    if not usable:
-        buildable(devices[0][1])
-    return next((device for wanted in (is_gpu, is_cpu) for device in usable if wanted(device)), usable[0])
+    preferred = sorted((device for _, device in devices), key=lambda d: 0 if is_gpu(d) else 1 if is_cpu(d) else 2)
+    return next((device for device in preferred if not build_failure(device)), None) or buildable(preferred[0])
 
 
 PROBE_KERNEL = "__kernel void probe(__global float *a) { a[get_global_id(0)] = 1.0f; }"
