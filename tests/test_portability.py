@@ -154,3 +154,24 @@ def test_parity_on_the_device_path(platform, tmp_path):
     reports = log.read_text() if log.exists() else ""
     assert not reports, reports[:6000]
     print(f"{platform.name}: {len(passed)} passed, {sum(o == 'skipped' for o in results.values())} skipped")
+
+
+def test_the_vendor_folder_lists_the_named_implementations_alone(tmp_path, capsys):
+    """``python -m clsdcam.backends.cl_icd DIR intel`` (CI's, where no device compiles in-process) writes Intel's ICD
+    file alone, never Oclgrind's; without names, every installed one; an unknown name is one usage line, exit 2."""
+    assert cl_icd.main([str(tmp_path / "intel"), "intel"]) == 0
+    exports = capsys.readouterr().out
+    assert f"export OCL_ICD_VENDORS='{tmp_path / 'intel'}'" in exports
+    written = {path.name for path in (tmp_path / "intel").glob("clsdcam-*.icd")}
+    assert written == ({"clsdcam-intel.icd"} if cl_icd.library("intel") else set())
+    assert ("LD_LIBRARY_PATH" in exports) == bool(cl_icd.library("intel"))
+
+    assert cl_icd.main([str(tmp_path / "all")]) == 0
+    assert {path.name for path in (tmp_path / "all").glob("clsdcam-*.icd")} == \
+        {f"clsdcam-{name}.icd" for name in cl_icd.INSTALL if cl_icd.library(name)}
+
+    capsys.readouterr()
+    assert cl_icd.main([str(tmp_path / "none"), "pocl"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "unknown: pocl" in err
+    assert not (tmp_path / "none").exists()

@@ -12,7 +12,8 @@ variable says. Two implementations install without a usable ICD file:
   interprets kernels and checks them (``OCLGRIND_*`` variables).
 
 The loader reads these variables once, when pyopencl loads: they take effect in a new process. From a shell:
-``eval "$(python -m clsdcam.backends.cl_icd DIR)"`` writes the folder DIR and exports them.
+``eval "$(python -m clsdcam.backends.cl_icd DIR)"`` writes the folder DIR and exports them; names after DIR
+(``intel``, ``oclgrind``) list those alone beside the system's.
 """
 from __future__ import annotations
 
@@ -58,12 +59,15 @@ def vendors_environment(folder: Path, names=tuple(INSTALL)) -> dict[str, str]:
 
 
 def main(argv=None) -> int:
-    """``python -m clsdcam.backends.cl_icd DIR``: write DIR, print the ``export`` lines for a shell's eval."""
+    """``python -m clsdcam.backends.cl_icd DIR [NAME ...]``: write DIR (every implementation of :data:`INSTALL`, or
+    the NAMEs), print the ``export`` lines for a shell's eval."""
     argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 1:
-        print("usage: python -m clsdcam.backends.cl_icd DIR   (eval its output in a shell)", file=sys.stderr)
+    unknown = [name for name in argv[1:] if name not in INSTALL]
+    if not argv or unknown:
+        print(f"usage: python -m clsdcam.backends.cl_icd DIR [{' '.join(INSTALL)}]   (eval its output in a shell)"
+              + (f"; unknown: {' '.join(unknown)}" if unknown else ""), file=sys.stderr)
         return 2
-    for name, value in vendors_environment(Path(argv[0])).items():
+    for name, value in vendors_environment(Path(argv[0]), tuple(argv[1:]) or tuple(INSTALL)).items():
         print(f"export {name}='{value}'")
     return 0
 
