@@ -20,9 +20,10 @@ import bench_stop  # noqa: E402
 import compare_recon  # noqa: E402
 import compare_speed  # noqa: E402
 import rank_signals  # noqa: E402
+import weight_candidate  # noqa: E402
 import weight_factors  # noqa: E402
 import weight_oracles  # noqa: E402
-from clsdcam.metrics import psnr  # noqa: E402
+from clsdcam.metrics import psnr, spectral_angle  # noqa: E402
 from clsdcam.solve.auto_weights import AUTO_AT  # noqa: E402
 from clsdcam.solve.settings import AUTO_CAP  # noqa: E402
 from clsdcam.solve.solver import Settings, Solver  # noqa: E402
@@ -630,6 +631,43 @@ def test_weight_factors_counts_the_scenes_each_multiple_of_the_chosen_weight_pas
                     "| ×10 | 2 of 2 | – |",         # scene 0: 0.4 dB under τ, angle 0.5° worse: within the rule
                     "| ×1 in standard light, ×10 in low light | 2 of 2 | – |"]
 
+
+
+def test_weight_candidate_lightens_point_like_scenes_and_judges_them_against_their_sweep(tmp_path, capsys, monkeypatch):
+    """A scene whose 30-iteration iterate is point-like (mean/peak below --point-like) is solved at min(1, σ̂/σ0)·τ to
+    the default stop and judged against its sweep with that run among the fixed weights; a scene that is not keeps τ,
+    its sweep's own verdict and no new solve; panels of different seeds are refused."""
+    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
+    panel = tmp_path / "panel.json"
+    bench_panel.main(["--size", "24x32", "--bands", "8", "--scenes", "4", "--only", "3", "--marks", "auto",
+                      "--sweep", "3", "--seed", "7", "--out", str(tmp_path)])
+    (scene,) = json.loads(panel.read_text())["scenes"]
+    tau = scene["runs"]["default"]["tv_chosen"]
+    sigma = tau / weight_candidate.TotalVariation.auto_weight.per_noise
+    capsys.readouterr()
+
+    assert weight_candidate.main([str(panel), "--sigma0", str(10 * sigma), "--point-like", "1"]) == 0
+    table = capsys.readouterr().out
+    sim = bench_panel.panel_scene(scene, (24, 32), 8)
+    lighter = Solver(sim.calibration, settings=Settings(tv=0.1 * tau)).solve(sim.measurement)
+    lighter_point = {"iteration": lighter.iterations, "psnr": psnr(lighter.cube, sim.truth),
+                     "angle": spectral_angle(lighter.cube, sim.truth)}
+    runs = {**scene["runs"], "--tv lighter": {"points": [lighter_point]}, "own": {"points": [lighter_point]}}
+    db, deg = bench_panel.sweep_margins({**scene, "runs": runs}, "own")
+    assert f"| 3 | lines | standard | {weight_candidate.mean_over_peak(sim):.4f} | ×0.10 |" in table
+    assert f"({lighter.iterations}) | " in table and f"{db:+.2f} dB / {deg:+.2f}°" in table
+    assert f"candidate passes {int(min(db, deg) >= 0)} of 1" in table
+
+    assert weight_candidate.main([str(panel), "--point-like", "0"]) == 0
+    table = capsys.readouterr().out
+    today = int(weight_factors.passes(json.loads(panel.read_text())["scenes"][0], "default"))
+    assert "| ×1.00 |" in table and f"candidate passes {today} of 1; the rule as it is, {today} of 1" in table
+
+    other = tmp_path / "other.json"
+    other.write_text(panel.read_text().replace('"seed": 7', '"seed": 8', 1))
+    with pytest.raises(SystemExit) as refused:
+        weight_candidate.main([str(panel), str(other)])
+    assert refused.value.code == 2 and "one seed, size and bands" in capsys.readouterr().err
 
 PANEL_TOOLS = (bench_panel, bench_converged, bench_stop)     # with --scenes: an index past the panel is refused too
 
