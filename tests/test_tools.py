@@ -643,7 +643,7 @@ def test_weight_candidate_lightens_point_like_scenes_and_judges_them_against_the
                       "--sweep", "3", "--seed", "7", "--out", str(tmp_path)])
     (scene,) = json.loads(panel.read_text())["scenes"]
     tau = scene["runs"]["default"]["tv_chosen"]
-    sigma = tau / weight_candidate.TotalVariation.auto_weight.per_noise
+    sigma = scene["runs"]["default"]["noise_estimate"]
     capsys.readouterr()
 
     assert weight_candidate.main([str(panel), "--sigma0", str(10 * sigma), "--point-like", "1"]) == 0
@@ -656,11 +656,15 @@ def test_weight_candidate_lightens_point_like_scenes_and_judges_them_against_the
     db, deg = bench_panel.sweep_margins({**scene, "runs": runs}, "own")
     assert f"| 3 | lines | standard | {weight_candidate.mean_over_peak(sim):.4f} | ×0.10 |" in table
     assert f"({lighter.iterations}) | " in table and f"{db:+.2f} dB / {deg:+.2f}°" in table
-    assert f"candidate passes {int(min(db, deg) >= 0)} of 1" in table
+    today = int(weight_factors.passes(scene, "default"))
+    assert f"candidate passes {int(min(db, deg) >= 0)} of 1; the rule as it is, {today} of 1" in table
 
+    def no_solve(*args):
+        raise AssertionError("a scene the candidate leaves at τ is not solved again")
+
+    monkeypatch.setattr(weight_candidate, "run", no_solve)
     assert weight_candidate.main([str(panel), "--point-like", "0"]) == 0
     table = capsys.readouterr().out
-    today = int(weight_factors.passes(json.loads(panel.read_text())["scenes"][0], "default"))
     assert "| ×1.00 |" in table and f"candidate passes {today} of 1; the rule as it is, {today} of 1" in table
 
     other = tmp_path / "other.json"
@@ -668,6 +672,9 @@ def test_weight_candidate_lightens_point_like_scenes_and_judges_them_against_the
     with pytest.raises(SystemExit) as refused:
         weight_candidate.main([str(panel), str(other)])
     assert refused.value.code == 2 and "one seed, size and bands" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as refused:
+        weight_candidate.main([str(panel), "--sigma0", "0"])
+    assert refused.value.code == 2 and "must be > 0" in capsys.readouterr().err
 
 PANEL_TOOLS = (bench_panel, bench_converged, bench_stop)     # with --scenes: an index past the panel is refused too
 
