@@ -632,7 +632,6 @@ def test_weight_factors_counts_the_scenes_each_multiple_of_the_chosen_weight_pas
                     "| ×1 in standard light, ×10 in low light | 2 of 2 | – |"]
 
 
-
 def test_weight_candidate_lightens_point_like_scenes_and_judges_them_against_their_sweep(tmp_path, capsys, monkeypatch):
     """A scene whose 30-iteration iterate is point-like (mean/peak below --point-like) is solved at min(1, σ̂/σ0)·τ to
     the default stop and judged against its sweep with that run among the fixed weights; a scene that is not keeps τ,
@@ -675,6 +674,7 @@ def test_weight_candidate_lightens_point_like_scenes_and_judges_them_against_the
     with pytest.raises(SystemExit) as refused:
         weight_candidate.main([str(panel), "--sigma0", "0"])
     assert refused.value.code == 2 and "must be > 0" in capsys.readouterr().err
+
 
 PANEL_TOOLS = (bench_panel, bench_converged, bench_stop)     # with --scenes: an index past the panel is refused too
 

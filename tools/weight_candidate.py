@@ -11,7 +11,7 @@ elsewhere m = 1, the rule as it is. A scene with m = 1 keeps its sweep's verdict
 (``bench_panel.sweep_margins``: PSNR within 0.5 dB of the best fixed weight, its angle within 1° of that run's),
 the candidate's run counted among the fixed weights. The panels (``--marks auto``, with a sweep) must share one
 seed, size and bands, which rebuild every scene (``bench_panel.panel_scene``); several files are merged by scene
-(``weight_factors.merged_scenes``).
+(``weight_factors.merged``).
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_panel import AUTO, panel_scene, point, run, sweep_margins  # noqa: E402
-from weight_factors import merged_scenes, sweep_multiples  # noqa: E402
+from weight_factors import at_stop, merged, sweep_multiples  # noqa: E402
 from clsdcam.cli.options import number, size  # noqa: E402
 from clsdcam.solve.auto_weights import AUTO_AT  # noqa: E402
 from clsdcam.solve.solver import Settings, Solver  # noqa: E402
@@ -70,10 +70,9 @@ def judge(scene: dict, shape, bands: int, sigma0: float, threshold: float) -> di
 def row(scene: dict, verdict: dict) -> str:
     db, deg = verdict["margins"]
     margin = f"{db:+.2f} dB / {deg:+.2f}°"
-    own = scene["runs"]["candidate"]
     return (f"| {scene['index']} | {scene['kind']} | {scene['level']} | {verdict['likeness']:.4f} | "
-            f"×{verdict['multiple']:.2f} | {point(scene['runs']['default'])} | {point(own)} "
-            f"({own['points'][-1]['iteration']}) | " + (margin if verdict["passes"] else f"**{margin}**") + " |")
+            f"×{verdict['multiple']:.2f} | {point(scene['runs']['default'])} | {at_stop(scene['runs']['candidate'])} | "
+            + (margin if verdict["passes"] else f"**{margin}**") + " |")
 
 
 def main(argv=None) -> int:
@@ -85,9 +84,9 @@ def main(argv=None) -> int:
                         help="mean/peak of the 30-iteration iterate below which a scene is point-like")
     args = parser.parse_args(argv)
     try:
-        settings = {(p["seed"], p["size"], p["bands"], p["marks"])
-                    for p in (json.loads(Path(f).read_text()) for f in args.panels)}
-        scenes = merged_scenes(args.panels)
+        panels = [json.loads(Path(f).read_text()) for f in args.panels]
+        settings = {(p["seed"], p["size"], p["bands"], p["marks"]) for p in panels}
+        scenes = merged(panels)
     except (OSError, ValueError, KeyError, TypeError) as error:
         parser.error(f"cannot read the panels: {error}")
     if len(settings) != 1 or next(iter(settings))[3] != AUTO:

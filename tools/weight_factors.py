@@ -29,10 +29,12 @@ from bench_panel import best_fixed, point, sweep_margins, sweep_weights  # noqa:
 
 def merged_scenes(paths) -> dict[int, dict]:
     """Scene index -> scene of every panel file, in index order (a later file's scene replaces an earlier one's)."""
-    scenes = {}
-    for path in paths:
-        for scene in json.loads(Path(path).read_text())["scenes"]:
-            scenes[scene["index"]] = scene
+    return merged([json.loads(Path(path).read_text()) for path in paths])
+
+
+def merged(panels) -> dict[int, dict]:
+    """Scene index -> scene of every panel (loaded), in index order (a later panel's scene replaces an earlier one's)."""
+    scenes = {scene["index"]: scene for panel in panels for scene in panel["scenes"]}
     return dict(sorted(scenes.items()))
 
 
