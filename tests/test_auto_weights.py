@@ -5,14 +5,14 @@ import pytest
 
 from clsdcam.solve.auto_weights import AUTO_AT, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.solve.priors import build_priors
+from clsdcam.solve.priors import AutoWeight, build_priors
 from clsdcam.solve.settings import Settings
 
 BACKEND = NumpyBackend("float64")
 
 
-def hook(tv="auto") -> AutoWeights:
-    return AutoWeights(build_priors(BACKEND, Settings(tv=tv), lambda name: 1.0))
+def hook(tv="auto", point_like_below: float = 0.0) -> AutoWeights:
+    return AutoWeights(build_priors(BACKEND, Settings(tv=tv), lambda name: 1.0), point_like_below)
 
 
 @pytest.mark.parametrize("done, iters, due", [
@@ -28,13 +28,21 @@ def test_nothing_is_due_without_an_auto_weight():
 
 
 class Residual:
-    """A problem whose residual is white noise of σ = 0.01, and a driver that records what it is asked."""
+    """A problem whose residual is white noise of σ (0.01) and whose iterate's window is ``cube``, and a driver that
+    records what it is asked."""
 
     backend = BACKEND
 
-    def __init__(self):
-        self.residual_buffer = np.random.default_rng(0).normal(0, 0.01, (256, 256))
+    def __init__(self, sigma: float = 0.01, cube=None):
+        self.residual_buffer = np.random.default_rng(0).normal(0, sigma, (256, 256))
         self.x, self.iterations, self.rescored, self.notes = None, AUTO_AT, [], []
+        self.cube, self.model = cube, self
+
+    def solution(self, x):
+        return self.cube
+
+    def window(self, field):
+        return field
 
     def residual(self, x):
         return self.residual_buffer
@@ -57,3 +65,49 @@ def test_act_chooses_from_the_noise_and_rescores():
     assert prior.relative == pytest.approx(prior.auto_weight.for_noise(weights.chosen["noise_estimate"]))
     assert stand_in.rescored == [stand_in.objective] and "tv: auto" in stand_in.notes[0]
     assert weights.due_in(0, 300) is None
+
+
+@pytest.mark.parametrize("noise, point_like, factor", [
+    (0.003, False, 1.0),            # not point-like: the rule as it is
+    (0.003, True, 0.003 / 0.009),   # point-like in good light: lighter by σ̂/σ0
+    (0.02, True, 1.0),              # point-like in low light: as it is
+])
+def test_a_point_like_scene_in_good_light_takes_a_lighter_weight(noise, point_like, factor):
+    rule = AutoWeight(start=3e-4, per_noise=0.06, lowest=1e-9, highest=1.0, point_noise=0.009)
+    assert rule.for_noise(noise, point_like) == pytest.approx(0.06 * noise * factor)
+
+
+def test_the_lighter_weight_keeps_the_floor_and_needs_a_point_noise():
+    rule = AutoWeight(start=3e-4, per_noise=0.06, lowest=1e-4, highest=1.0, point_noise=0.009)
+    assert rule.for_noise(0.003, True) == pytest.approx(1e-4)           # 0.06·0.003/3 = 6e-5, below the floor
+    assert rule._replace(point_noise=None).for_noise(0.003, True) == pytest.approx(0.06 * 0.003)
+
+
+def one_lit_pixel() -> np.ndarray:
+    cube = np.zeros((4, 32, 32))
+    cube[1, 10, 10] = 2.0
+    return cube
+
+
+@pytest.mark.parametrize("cube, mean_over_peak, point_like", [
+    (one_lit_pixel(), 1 / (4 * 32 * 32), True),
+    (np.full((4, 32, 32), 0.5), 1.0, False),
+    (np.zeros((4, 32, 32)), 1.0, False),            # no light: not point-like (and no division by 0)
+])
+def test_act_reads_how_point_like_the_iterate_is(cube, mean_over_peak, point_like):
+    weights, stand_in = hook(point_like_below=0.0025), Residual(sigma=0.003, cube=cube)
+    prior = weights.priors[0]
+    weights.act(stand_in, stand_in)
+    noise = weights.chosen["noise_estimate"]
+    assert weights.chosen["mean_over_peak"] == pytest.approx(mean_over_peak)
+    assert prior.relative == pytest.approx(prior.auto_weight.for_noise(noise, point_like))
+    if point_like:
+        assert prior.relative < prior.auto_weight.for_noise(noise)
+    assert ("a point-like scene" in stand_in.notes[0]) == point_like
+
+
+def test_an_algorithm_without_a_threshold_is_never_point_like():
+    weights, stand_in = hook(), Residual(sigma=0.003, cube=one_lit_pixel())
+    weights.act(stand_in, stand_in)
+    assert "mean_over_peak" not in weights.chosen
+    assert weights.priors[0].relative == pytest.approx(weights.priors[0].auto_weight.for_noise(0.003), rel=0.05)

@@ -56,6 +56,10 @@ class Algorithm:
     settings (docs/convergence.md)."""
     backends: tuple[str, ...] | None = None
     """The backend names it runs on (``--backend auto`` picks NumPy when OpenCL is not one); None: every backend."""
+    point_like_below = 0.0
+    """The mean over the peak of its iterate at the auto weights' iteration below which ``auto`` takes the scene as
+    point-like (:mod:`clsdcam.solve.auto_weights`); 0: never (the threshold is measured per algorithm, since each
+    one's early iterate spreads the light differently)."""
 
     backend: Any
     x: Any

@@ -17,7 +17,8 @@ A weight can also be ``auto`` for a prior with an ``auto_weight`` rule: it start
 and, once the measurement's noise level σ̂ (relative to max|b|) is known (:mod:`clsdcam.solve.noise`), becomes
 ``per_noise``·σ̂. A soft-thresholding denoiser's best threshold grows with the noise (the universal
 threshold is ∝ σ); ``per_noise`` is calibrated on the simulator's scenes (docs/benchmarks.md, "Choosing
-``--tv``").
+``--tv``"). On a point-like scene (the algorithm's iterate at that point has its light in a few pixels,
+:mod:`clsdcam.solve.auto_weights`) it is ``per_noise``·σ̂·min(1, σ̂/``point_noise``).
 
 Adding a prior: one class (``prox``, ``value``, ``reference``; the math in its docstring) and one row
 of :data:`PRIORS` (the ``Settings`` field and the ``--flag`` are generated from the row), and one test.
@@ -40,10 +41,16 @@ class AutoWeight(NamedTuple):
     per_noise: float
     lowest: float
     highest: float
+    point_noise: float | None = None    # σ0: on a point-like scene, the weight falls as σ̂² below it (None: it does not)
 
-    def for_noise(self, noise: float) -> float:
-        """per_noise·σ̂, kept within [lowest, highest]."""
-        return float(np.clip(self.per_noise * noise, self.lowest, self.highest))
+    def for_noise(self, noise: float, point_like: bool = False) -> float:
+        """per_noise·σ̂, times min(1, σ̂/σ0) on a point-like scene, kept within [lowest, highest].
+
+        A scene whose light sits in a few pixels and bands (narrow lines, point sources) wants a lighter weight in
+        good light than the rule's σ̂ gives, and the same in low light (docs/convergence.md, "A lighter weight for
+        point-like scenes in good light")."""
+        factor = min(1.0, noise / self.point_noise) if point_like and self.point_noise else 1.0
+        return float(np.clip(self.per_noise * noise * factor, self.lowest, self.highest))
 
 
 class Prior:
@@ -95,7 +102,7 @@ class TotalVariation(Prior):
 
     name = "tv"
     reference = "atb_max"
-    auto_weight = AutoWeight(start=3e-4, per_noise=0.06, lowest=3e-5, highest=3e-3)
+    auto_weight = AutoWeight(start=3e-4, per_noise=0.06, lowest=3e-5, highest=3e-3, point_noise=0.009)
     fusion = "subspace_tv"
 
     def __init__(self, backend, weight: float, settings):

@@ -35,6 +35,9 @@ if TYPE_CHECKING:                 # the parser lists the algorithms: the steps' 
 DATA, TV, NONNEG = 1e-2, 1e-2, 1e-2
 RELAXATION = 1.7
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
+# mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on two panels'
+# lines scenes, 0.0049–0.21 on their other 32 (docs/convergence.md, "A lighter weight for point-like scenes")
+POINT_LIKE_BELOW = 0.0025
 
 
 def penalties_for(split: "SplittingBase") -> "Penalties":
@@ -77,6 +80,7 @@ class Admm(Algorithm):
     field_buffers = 19
     band_space_only = True         # no splitting of a spectral subspace yet
     priors = ("tv", "l1")          # the priors it has a closed-form step for (band_steps)
+    point_like_below = POINT_LIKE_BELOW
 
     def __init__(self, backend, x0, step: float, rules):
         super().__init__(backend, x0, step, rules)
