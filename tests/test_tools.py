@@ -20,9 +20,9 @@ import bench_stop  # noqa: E402
 import compare_recon  # noqa: E402
 import compare_speed  # noqa: E402
 import rank_signals  # noqa: E402
-import weight_candidate  # noqa: E402
 import weight_factors  # noqa: E402
 import weight_oracles  # noqa: E402
+import weight_rejudge  # noqa: E402
 from clsdcam.metrics import psnr, spectral_angle  # noqa: E402
 from clsdcam.solve.auto_weights import AUTO_AT  # noqa: E402
 from clsdcam.solve.settings import AUTO_CAP  # noqa: E402
@@ -632,48 +632,50 @@ def test_weight_factors_counts_the_scenes_each_multiple_of_the_chosen_weight_pas
                     "| ×1 in standard light, ×10 in low light | 2 of 2 | – |"]
 
 
-def test_weight_candidate_lightens_point_like_scenes_and_judges_them_against_their_sweep(tmp_path, capsys, monkeypatch):
-    """A scene whose 30-iteration iterate is point-like (mean/peak below --point-like) is solved at min(1, σ̂/σ0)·τ to
-    the default stop and judged against its sweep with that run among the fixed weights; a scene that is not keeps τ,
-    its sweep's own verdict and no new solve; panels of different seeds are refused."""
+def test_weight_rejudge_solves_again_the_scenes_whose_default_weight_changed(tmp_path, capsys, monkeypatch):
+    """A scene whose default weight is now another than its panel's is solved again at the default, to its stop, and
+    judged against its sweep with that run among the fixed weights; a scene whose weight is the same keeps its sweep's
+    verdict and is not solved again; panels of different seeds are refused."""
     monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
     panel = tmp_path / "panel.json"
     bench_panel.main(["--size", "24x32", "--bands", "8", "--scenes", "4", "--only", "3", "--marks", "auto",
                       "--sweep", "3", "--seed", "7", "--out", str(tmp_path)])
-    (scene,) = json.loads(panel.read_text())["scenes"]
+    results = json.loads(panel.read_text())
+    (scene,) = results["scenes"]
     tau = scene["runs"]["default"]["tv_chosen"]
-    sigma = scene["runs"]["default"]["noise_estimate"]
+    scene["runs"]["default"]["tv_chosen"] = 3 * tau              # as if an older rule had chosen 3τ
+    older = tmp_path / "older.json"
+    older.write_text(json.dumps(results))
     capsys.readouterr()
 
-    assert weight_candidate.main([str(panel), "--sigma0", str(10 * sigma), "--point-like", "1"]) == 0
+    assert weight_rejudge.main([str(older)]) == 0
     table = capsys.readouterr().out
     sim = bench_panel.panel_scene(scene, (24, 32), 8)
-    lighter = Solver(sim.calibration, settings=Settings(tv=0.1 * tau)).solve(sim.measurement)
-    lighter_point = {"iteration": lighter.iterations, "psnr": psnr(lighter.cube, sim.truth),
-                     "angle": spectral_angle(lighter.cube, sim.truth)}
-    runs = {**scene["runs"], "--tv lighter": {"points": [lighter_point]}, "own": {"points": [lighter_point]}}
+    now = Solver(sim.calibration).solve(sim.measurement)
+    assert now.attrs["tv_chosen"] == pytest.approx(tau)
+    now_point = {"iteration": now.iterations, "psnr": psnr(now.cube, sim.truth),
+                 "angle": spectral_angle(now.cube, sim.truth)}
+    runs = {**scene["runs"], "--tv now": {"points": [now_point]}, "own": {"points": [now_point]}}
     db, deg = bench_panel.sweep_margins({**scene, "runs": runs}, "own")
-    assert f"| 3 | lines | standard | {weight_candidate.mean_over_peak(sim):.4f} | ×0.10 |" in table
-    assert f"({lighter.iterations}) | " in table and f"{db:+.2f} dB / {deg:+.2f}°" in table
-    today = int(weight_factors.passes(scene, "default"))
-    assert f"candidate passes {int(min(db, deg) >= 0)} of 1; the rule as it is, {today} of 1" in table
+    likeness = weight_rejudge.chosen_now(sim)["mean_over_peak"]
+    assert f"| 3 | lines | standard | {likeness:.4f} | {3 * tau:.3g} → {tau:.3g} |" in table
+    assert f"({now.iterations}) | " in table and f"{db:+.2f} dB / {deg:+.2f}°" in table
+    then = int(weight_factors.passes(scene, "default"))
+    assert f"the default now passes {int(min(db, deg) >= 0)} of 1; the panel's default, {then} of 1" in table
 
     def no_solve(*args):
-        raise AssertionError("a scene the candidate leaves at τ is not solved again")
+        raise AssertionError("a scene whose weight is the panel's is not solved again")
 
-    monkeypatch.setattr(weight_candidate, "run", no_solve)
-    assert weight_candidate.main([str(panel), "--point-like", "0"]) == 0
+    monkeypatch.setattr(weight_rejudge, "run", no_solve)
+    assert weight_rejudge.main([str(panel)]) == 0
     table = capsys.readouterr().out
-    assert "| ×1.00 |" in table and f"candidate passes {today} of 1; the rule as it is, {today} of 1" in table
+    assert f"| {tau:.3g} → {tau:.3g} |" in table and f"now passes {then} of 1; the panel's default, {then} of 1" in table
 
     other = tmp_path / "other.json"
     other.write_text(panel.read_text().replace('"seed": 7', '"seed": 8', 1))
     with pytest.raises(SystemExit) as refused:
-        weight_candidate.main([str(panel), str(other)])
+        weight_rejudge.main([str(panel), str(other)])
     assert refused.value.code == 2 and "one seed, size and bands" in capsys.readouterr().err
-    with pytest.raises(SystemExit) as refused:
-        weight_candidate.main([str(panel), "--sigma0", "0"])
-    assert refused.value.code == 2 and "must be > 0" in capsys.readouterr().err
 
 
 PANEL_TOOLS = (bench_panel, bench_converged, bench_stop)     # with --scenes: an index past the panel is refused too
