@@ -69,7 +69,7 @@ def test_act_chooses_from_the_noise_and_rescores():
 
 @pytest.mark.parametrize("noise, point_like, factor", [
     (0.003, False, 1.0),            # not point-like: the rule as it is
-    (0.003, True, (0.003 / 0.009) ** 2),   # point-like in good light: lighter by (σ̂/σ0)²
+    (0.003, True, 0.003 / 0.009),   # point-like in good light: lighter by σ̂/σ0
     (0.02, True, 1.0),              # point-like in low light: as it is
 ])
 def test_a_point_like_scene_in_good_light_takes_a_lighter_weight(noise, point_like, factor):
@@ -79,7 +79,7 @@ def test_a_point_like_scene_in_good_light_takes_a_lighter_weight(noise, point_li
 
 def test_the_lighter_weight_keeps_the_floor_and_needs_a_point_noise():
     rule = AutoWeight(start=3e-4, per_noise=0.06, lowest=1e-4, highest=1.0, point_noise=0.009)
-    assert rule.for_noise(0.003, True) == pytest.approx(1e-4)           # 0.06·0.003/9 = 2e-5, below the floor
+    assert rule.for_noise(0.003, True) == pytest.approx(1e-4)           # 0.06·0.003/3 = 6e-5, below the floor
     assert rule._replace(point_noise=None).for_noise(0.003, True) == pytest.approx(0.06 * 0.003)
 
 

@@ -18,7 +18,7 @@ and, once the measurement's noise level σ̂ (relative to max|b|) is known (:mod
 ``per_noise``·σ̂. A soft-thresholding denoiser's best threshold grows with the noise (the universal
 threshold is ∝ σ); ``per_noise`` is calibrated on the simulator's scenes (docs/benchmarks.md, "Choosing
 ``--tv``"). On a point-like scene (the algorithm's iterate at that point has its light in a few pixels,
-:mod:`clsdcam.solve.auto_weights`) it is ``per_noise``·σ̂·min(1, σ̂/``point_noise``)².
+:mod:`clsdcam.solve.auto_weights`) it is ``per_noise``·σ̂·min(1, σ̂/``point_noise``).
 
 Adding a prior: one class (``prox``, ``value``, ``reference``; the math in its docstring) and one row
 of :data:`PRIORS` (the ``Settings`` field and the ``--flag`` are generated from the row), and one test.
@@ -41,15 +41,15 @@ class AutoWeight(NamedTuple):
     per_noise: float
     lowest: float
     highest: float
-    point_noise: float | None = None    # σ0: on a point-like scene, the weight falls as σ̂³ below it (None: it does not)
+    point_noise: float | None = None    # σ0: on a point-like scene, the weight falls as σ̂² below it (None: it does not)
 
     def for_noise(self, noise: float, point_like: bool = False) -> float:
-        """per_noise·σ̂, times min(1, σ̂/σ0)² on a point-like scene, kept within [lowest, highest].
+        """per_noise·σ̂, times min(1, σ̂/σ0) on a point-like scene, kept within [lowest, highest].
 
         A scene whose light sits in a few pixels and bands (narrow lines, point sources) wants a lighter weight in
         good light than the rule's σ̂ gives, and the same in low light (docs/convergence.md, "A lighter weight for
         point-like scenes in good light")."""
-        factor = min(1.0, noise / self.point_noise) ** 2 if point_like and self.point_noise else 1.0
+        factor = min(1.0, noise / self.point_noise) if point_like and self.point_noise else 1.0
         return float(np.clip(self.per_noise * noise * factor, self.lowest, self.highest))
 
 
