@@ -3,10 +3,13 @@ chooses from the residual's noise and the driver rescores under the new objectiv
 import numpy as np
 import pytest
 
+from clsdcam.algorithms.admm import Admm
 from clsdcam.solve.auto_weights import AUTO_AT, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
-from clsdcam.solve.priors import AutoWeight, build_priors
+from clsdcam.sim import simulate
+from clsdcam.solve.priors import AutoWeight, TotalVariation, build_priors
 from clsdcam.solve.settings import Settings
+from clsdcam.solve.solver import reconstruct
 
 BACKEND = NumpyBackend("float64")
 
@@ -111,3 +114,21 @@ def test_an_algorithm_without_a_threshold_is_never_point_like():
     weights.act(stand_in, stand_in)
     assert "mean_over_peak" not in weights.chosen
     assert weights.priors[0].relative == pytest.approx(weights.priors[0].auto_weight.for_noise(0.003), rel=0.05)
+
+
+def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene():
+    """Through the solver: ADMM's 30-iteration cube (the sensor window it returns) is what ``mean_over_peak`` reads,
+    three lit voxels in good light count as point-like and take the lighter weight; FISTA reads nothing."""
+    cube = np.zeros((8, 48, 64), np.float32)
+    for band, y, x in ((1, 20, 20), (4, 30, 40), (6, 15, 45)):
+        cube[band, y, x] = 1.0
+    sim = simulate("points", (48, 64), 8, seed=0, cube=cube)
+    admm = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="admm")
+    noise, rule = admm.attrs["noise_estimate"], TotalVariation.auto_weight
+    assert admm.attrs["mean_over_peak"] == pytest.approx(admm.cube.mean(dtype=float) / admm.cube.max(), rel=1e-5)
+    assert admm.attrs["mean_over_peak"] < Admm.point_like_below == 0.0025 and noise < rule.point_noise
+    assert admm.attrs["tv_chosen"] == pytest.approx(rule.for_noise(noise, True))
+    assert rule.for_noise(noise, True) < 0.5 * rule.for_noise(noise)
+    fista = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="fista")
+    assert "mean_over_peak" not in fista.attrs
+    assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))

@@ -678,6 +678,32 @@ def test_weight_rejudge_solves_again_the_scenes_whose_default_weight_changed(tmp
     assert refused.value.code == 2 and "one seed, size and bands" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("spoil, message", [
+    (lambda p: p["scenes"][0]["runs"]["default"].update(tv_chosen=None), "cannot read the panels"),
+    (lambda p: p["scenes"][0]["runs"]["default"].update(tv_chosen=0), "weight is not > 0"),
+    (lambda p: p["scenes"][0]["runs"].pop("default"), "cannot read the panels"),
+    (lambda p: p["scenes"][0].update(level="dusk"), "not a panel scene"),
+    (lambda p: p["scenes"][0]["runs"].update({"--tv x": {}}), "cannot read the panels"),
+    (lambda p: p.update(size="24by32"), "cannot read the panels"),
+    (lambda p: p.update(marks=[10, 20]), "--marks auto"),
+    (lambda p: p.update(backend="opencl"), "on NumPy"),
+])
+def test_weight_rejudge_refuses_a_malformed_panel_before_solving(tmp_path, capsys, monkeypatch, spoil, message):
+    """Whatever the judgement would trip on later is one line on stderr, exit 2, before any scene is solved."""
+    scene = {"index": 3, "kind": "lines", "level": "standard", "seed": 5,
+             "runs": {"default": {"tv_chosen": 1e-4}, "--tv 1e-05": {}, "--tv 1e-04": {}, "--tv 0.001": {}}}
+    results = {"seed": 7, "size": "24x32", "bands": 8, "marks": "auto", "backend": "numpy", "scenes": [scene]}
+    assert weight_rejudge.checked(json.loads(json.dumps(scene)))          # whole, the panel would be judged
+    spoil(results)
+    panel = tmp_path / "panel.json"
+    panel.write_text(json.dumps(results))
+    monkeypatch.setattr(weight_rejudge, "judge", lambda *args: pytest.fail("a malformed panel was judged"))
+    with pytest.raises(SystemExit) as refused:
+        weight_rejudge.main([str(panel)])
+    errors = capsys.readouterr().err.strip().splitlines()
+    assert refused.value.code == 2 and "error:" in errors[-1] and message in errors[-1]
+
+
 PANEL_TOOLS = (bench_panel, bench_converged, bench_stop)     # with --scenes: an index past the panel is refused too
 
 

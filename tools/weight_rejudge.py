@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_panel import AUTO, panel_scene, point, run, sweep_margins  # noqa: E402
+from bench_panel import AUTO, KINDS, LEVELS, panel_scene, point, run, sweep_margins  # noqa: E402
 from weight_factors import at_stop, merged, sweep_multiples  # noqa: E402
 from clsdcam.cli.options import size  # noqa: E402
 from clsdcam.solve.auto_weights import AUTO_AT  # noqa: E402
@@ -61,26 +61,38 @@ def row(scene: dict, verdict: dict) -> str:
             + (margin if verdict["passes"] else f"**{margin}**") + " |")
 
 
+def checked(scene: dict) -> dict:
+    """The scene, if it holds what a re-judgement reads: a known kind and level, a seed, the default's weight (> 0)
+    and a sweep whose runs name their weights; else ValueError."""
+    if scene["kind"] not in KINDS or scene["level"] not in LEVELS or not isinstance(scene["seed"], int):
+        raise ValueError(f"scene {scene['index']}: not a panel scene")
+    if not float(scene["runs"]["default"]["tv_chosen"]) > 0:
+        raise ValueError(f"scene {scene['index']}: the default's weight is not > 0")
+    if not sweep_multiples(scene):
+        raise ValueError(f"scene {scene['index']}: no weight sweep (bench_panel.py --sweep N with N ≥ 1)")
+    return scene
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("panels", nargs="+", help="bench_panel.py panel.json files with a sweep (--marks auto)")
     args = parser.parse_args(argv)
     try:
         panels = [json.loads(Path(f).read_text()) for f in args.panels]
-        settings = {(p["seed"], p["size"], p["bands"], p["marks"]) for p in panels}
-        scenes = merged(panels)
-    except (OSError, ValueError, KeyError, TypeError) as error:
+        settings = {(p["seed"], p["size"], p["bands"], p["marks"] == AUTO, p["backend"]) for p in panels}
+        scenes = {i: checked(scene) for i, scene in merged(panels).items()}
+        shape = size()(panels[0]["size"])
+    except (OSError, ValueError, KeyError, TypeError, argparse.ArgumentTypeError) as error:
         parser.error(f"cannot read the panels: {error}")
-    if len(settings) != 1 or next(iter(settings))[3] != AUTO:
-        parser.error("the panels must share one seed, size and bands, each run to its own stop (--marks auto)")
-    if not scenes or any(not sweep_multiples(s) for s in scenes.values()):
-        parser.error("every scene needs a weight sweep (bench_panel.py --sweep N with N ≥ 1)")
-    (_, shape, bands, _), = settings
+    if len(settings) != 1 or settings != {(*next(iter(settings))[:3], True, "numpy")} or not scenes:
+        parser.error("the panels must share one seed, size and bands, each run to its own stop (--marks auto) on "
+                     "NumPy, where this tool solves")
+    (_, _, bands, _, _), = settings
     lines = ["| # | kind | noise | mean/peak at 30 | τ then → now | default then | default now | weight margin |",
              "|---:|---|---|---:|---|---|---|---|"]
     verdicts = []
     for scene in scenes.values():
-        verdicts.append(judge(scene, size()(shape), bands))
+        verdicts.append(judge(scene, shape, bands))
         lines.append(row(scene, verdicts[-1]))
     count = sum(v["passes"] for v in verdicts)
     print("\n".join(lines) + f"\n\nthe default now passes {count} of {len(verdicts)}; "

@@ -9,9 +9,12 @@ The same iterate says how point-like the scene is: its sensor window's mean over
 
     p = mean(v) / max(v),
 
-is 0.0005–0.0013 on the simulator's narrow-line scenes and 0.005–0.2 on the others, for ADMM's iterate (each
-algorithm's threshold, ``Algorithm.point_like_below``, is its own: FISTA's early iterate is blurrier). Below it, a
-rule with a ``point_noise`` lightens the weight in good light (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`)."""
+is 0.0005–0.0013 on the simulator's narrow-line scenes and 0.0035–0.2 on the others at 128×160×64, for ADMM's
+iterate; a lit fraction, it grows on smaller sensors (docs/convergence.md, "A lighter weight for point-like scenes in
+good light"). Each algorithm's threshold, ``Algorithm.point_like_below``, is its own: FISTA's early iterate is
+blurrier. Below it, a rule with a ``point_noise`` lightens the weight in good light
+(:meth:`clsdcam.solve.priors.AutoWeight.for_noise`). A warm start from a cube (``x0``) reads its own iterate there;
+a dark iterate counts as p = 1."""
 from __future__ import annotations
 
 from .noise import residual_noise

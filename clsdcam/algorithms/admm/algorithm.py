@@ -35,8 +35,8 @@ if TYPE_CHECKING:                 # the parser lists the algorithms: the steps' 
 DATA, TV, NONNEG = 1e-2, 1e-2, 1e-2
 RELAXATION = 1.7
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
-# mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on two panels'
-# lines scenes, 0.0049–0.21 on their other 32 (docs/convergence.md, "A lighter weight for point-like scenes")
+# mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64
+# panels' lines scenes, 0.0035–0.21 on their other 80 (docs/convergence.md, "A lighter weight for point-like scenes")
 POINT_LIKE_BELOW = 0.0025
 
 
