@@ -84,10 +84,10 @@ def main(argv=None) -> int:
         shape = size()(panels[0]["size"])
     except (OSError, ValueError, KeyError, TypeError, argparse.ArgumentTypeError) as error:
         parser.error(f"cannot read the panels: {error}")
-    if len(settings) != 1 or settings != {(*next(iter(settings))[:3], True, "numpy")} or not scenes:
+    (_, _, bands, to_stop, backend), *others = settings
+    if others or not to_stop or backend != "numpy" or not scenes:
         parser.error("the panels must share one seed, size and bands, each run to its own stop (--marks auto) on "
                      "NumPy, where this tool solves")
-    (_, _, bands, _, _), = settings
     lines = ["| # | kind | noise | mean/peak at 30 | τ then → now | default then | default now | weight margin |",
              "|---:|---|---|---:|---|---|---|---|"]
     verdicts = []
