@@ -411,13 +411,18 @@ def test_bench_converged_measures_starts_from_fista_and_from_the_answer(tmp_path
 def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys, piecewise_panel):
     """The traced run of as many iterations as the reference is the reference: its last cube is at distance 0; at a
     huge tolerance the steps' estimate fires after four windows (three ratios) and the net one a window later (its
-    first window starts at iteration 25); a stop's distance is its mark's; "stays within" reads every later mark."""
+    first window starts at iteration 25); a stop's distance is its mark's; "stays within" reads every later mark; the
+    reference's own error is its cube's relative distance from the truth."""
     bench_stop.main([*ONE_PIECEWISE_SCENE, "--iters", "150", "--tolerances", "1e9", "--cache", str(tmp_path / "cache"),
                      "--out", str(tmp_path)])
     scene = json.loads((tmp_path / "stop.json").read_text())["scenes"][0]
     marks = scene["marks"]
     assert [m["iteration"] for m in marks] == list(range(5, 151, 5)) and marks[-1]["distance"] == 0.0
     assert marks[0]["distance"] > 0.05
+    sim = bench_panel.panel_scene({k: scene[k] for k in ("kind", "level", "seed")}, (24, 32), 4)
+    xstar = bench_converged.reference_cube(sim, scene, scene["tv"], "admm", 150, tmp_path / "cache").astype(np.float64)
+    assert scene["error"] == pytest.approx(np.linalg.norm(sim.truth - xstar) / np.linalg.norm(xstar), rel=1e-9)
+    assert 0.01 < scene["error"] < 10
     (steps,), (net,) = scene["stops"]["steps"], scene["stops"]["net"]
     assert (steps["iteration"], net["iteration"]) == (100, 125)
     assert steps["distance"] == marks[19]["distance"] and net["distance"] == marks[24]["distance"]

@@ -13,8 +13,9 @@ are replayed on the run:
 * **steps** (the stop's): each window's summed relative steps Σ‖x_{i+1} − x_i‖/‖x_{i+1}‖;
 * **net**: each window's net move ‖x_end − x_start‖/‖x_end‖ (what a stop would get for one cube more).
 
-The table gives, per scene, the mark from which the run stays within the rules and its true distance there; and per
-estimate and ``--tolerances`` value, the iteration where that estimate first falls below it, the true distance
+The table gives, per scene, the mark from which the run stays within the rules and its true distance there, the
+reference's own error ‖x* − truth‖/‖x*‖ and the first over the second (the distance the rules need, in units of the
+reconstruction's error); and per estimate and ``--tolerances`` value, the iteration where that estimate first falls below it, the true distance
 then, and whether the run is within the rules from there on. Writes ``stop.json``, ``stop.md`` and ``stop.png`` (the
 true distance and both estimates against iterations, one panel a scene). The run is at a fixed τ from its first
 iteration (the default's own run chooses τ at iteration 30 and forgets its windows there).
@@ -91,7 +92,8 @@ def run_scene(plan: dict, args, cache: Path) -> dict:
                      for a in REFERENCE_ALGORITHMS})
     xstar = reference_cube(sim, plan, tau, "admm", args.reference_iters, cache)
     marks = traced_run(sim, tau, args.iters, args.every, xstar, ref)
-    return {**plan, "tv": tau, "reference": ref, "marks": marks, "settled": settled(marks, ref),
+    return {**plan, "tv": tau, "reference": ref, "error": relative(sim.truth, xstar), "marks": marks,
+            "settled": settled(marks, ref),
             "stops": {name: [stop(marks, name, t) for t in args.tolerances] for name in ESTIMATES}}
 
 
@@ -107,15 +109,16 @@ def markdown(results: dict) -> str:
             f"the weight {results['weight_from']}'s `--tv auto` chose; references {results['reference_iters']} "
             "iterations. Cells: the iteration where the estimate first falls below the tolerance, the true relative "
             "distance to the reference cube there, and whether the run is within the rules from there on.", "",
-            "| # | kind | stays within from | true distance there | "
+            "| # | kind | stays within from | true distance there | reference's error | distance over error | "
             + " | ".join(f"{name} at {t:g}" for name in ESTIMATES for t in tolerances) + " |",
-            "|---:|---|---|---|" + "---|" * (len(ESTIMATES) * len(tolerances))]
+            "|---:|---|---|---|---:|---:|" + "---|" * (len(ESTIMATES) * len(tolerances))]
     rows = []
     for s in results["scenes"]:
         first = s["settled"]
+        needed = first["distance"] if first else float("nan")
         cells = [stop_cell(found) for name in ESTIMATES for found in s["stops"][name]]
         rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {first['iteration'] if first else '–'} | "
-                    f"{first['distance'] if first else float('nan'):.3f} | " + " | ".join(cells) + " |")
+                    f"{needed:.3f} | {s['error']:.3f} | {needed / s['error']:.2f} | " + " | ".join(cells) + " |")
     return "\n".join(head + rows)
 
 
