@@ -16,9 +16,10 @@ are replayed on the run:
 The table gives, per scene, the mark from which the run stays within the rules and its true distance there, the
 reference's own error ‖x* − truth‖/‖x*‖ and that distance over the error (what the rules need, in units of the
 reconstruction's error); and per estimate and ``--tolerances`` value, the iteration where that estimate first
-falls below it, the true distance then, and whether the run is within the rules from there on. Writes ``stop.json``, ``stop.md`` and ``stop.png`` (the
-true distance and both estimates against iterations, one panel a scene). The run is at a fixed τ from its first
-iteration (the default's own run chooses τ at iteration 30 and forgets its windows there).
+falls below it, the true distance then, and whether the run is within the rules from there on. Writes
+``stop.json``, ``stop.md`` and ``stop.png`` (the true distance and both estimates against iterations, one panel a
+scene). The run is at a fixed τ from its first iteration (the default's own run chooses τ at iteration 30 and
+forgets its windows there).
 """
 from __future__ import annotations
 
