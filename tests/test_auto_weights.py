@@ -1,21 +1,24 @@
 """The automatic-weight hook (clsdcam.solve.auto_weights): due once, at AUTO_AT, only while a weight is pending; it
-chooses from the residual's noise and the driver rescores under the new objective."""
+chooses from the residual's noise and the driver rescores under the new objective; where the scene is not point-like,
+``--converge auto`` widens the stop."""
 import numpy as np
 import pytest
 
 from clsdcam.algorithms.admm import Admm
 from clsdcam.solve.auto_weights import AUTO_AT, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
+from clsdcam.errors import InputError
 from clsdcam.sim import simulate
 from clsdcam.solve.priors import AutoWeight, TotalVariation, build_priors
-from clsdcam.solve.settings import Settings
-from clsdcam.solve.solver import reconstruct
+from clsdcam.solve.driver import Driver, Rules
+from clsdcam.solve.settings import CONVERGE, CONVERGE_WIDE, Settings
+from clsdcam.solve.solver import Solver, reconstruct
 
 BACKEND = NumpyBackend("float64")
 
 
-def hook(tv="auto", point_like_below: float = 0.0) -> AutoWeights:
-    return AutoWeights(build_priors(BACKEND, Settings(tv=tv), lambda name: 1.0), point_like_below)
+def hook(tv="auto", point_like_below: float = 0.0, wide_stop: float | None = None) -> AutoWeights:
+    return AutoWeights(build_priors(BACKEND, Settings(tv=tv), lambda name: 1.0), point_like_below, wide_stop)
 
 
 @pytest.mark.parametrize("done, iters, due", [
@@ -32,9 +35,11 @@ def test_nothing_is_due_without_an_auto_weight():
 
 class Residual:
     """A problem whose residual is white noise of σ (0.01) and whose iterate's window is ``cube``, and a driver that
-    records what it is asked."""
+    records what it is asked (its stop the driver's own, at CONVERGE)."""
 
     backend = BACKEND
+    rules = Rules(converge=CONVERGE)
+    widen_stop = Driver.widen_stop
 
     def __init__(self, sigma: float = 0.01, cube=None):
         self.residual_buffer = np.random.default_rng(0).normal(0, sigma, (256, 256))
@@ -132,3 +137,61 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene():
     fista = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="fista")
     assert "mean_over_peak" not in fista.attrs
     assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))
+
+
+@pytest.mark.parametrize("cube, widened", [
+    (one_lit_pixel(), False),                       # point-like: the stop stays at CONVERGE
+    (np.full((4, 32, 32), 0.5), True),
+    (np.zeros((4, 32, 32)), True),                  # a dark iterate counts as p = 1
+])
+def test_the_stop_widens_where_the_probe_reads_a_scene_that_is_not_point_like(cube, widened):
+    weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
+    weights.act(stand_in, stand_in)
+    assert stand_in.rules.converge == (CONVERGE_WIDE if widened else CONVERGE)
+    assert any(line.startswith(f"stop: --converge auto, {CONVERGE_WIDE:g}") for line in stand_in.notes) == widened
+
+
+@pytest.mark.parametrize("point_like_below, wide_stop", [(0.0, CONVERGE_WIDE), (0.0025, None)])
+def test_the_stop_stays_without_a_probe_or_without_auto(point_like_below, wide_stop):
+    """An algorithm without a threshold reads nothing, so the stop stays; so it does with a --converge of the user's."""
+    weights, stand_in = hook(point_like_below=point_like_below, wide_stop=wide_stop), Residual(cube=np.ones((4, 8, 8)))
+    weights.act(stand_in, stand_in)
+    assert stand_in.rules.converge == CONVERGE and len(stand_in.notes) == 1
+
+
+@pytest.mark.parametrize("settings, start, wide", [
+    ({}, CONVERGE, CONVERGE_WIDE),
+    ({"converge": 0.07}, 0.07, None),
+    ({"iters": 50}, 0.0, None),
+    ({"iters": 50, "converge": 0.07}, 0.0, None),
+])
+def test_converge_auto_starts_at_converge_and_may_widen_only_with_iters_auto(settings, start, wide):
+    s = Settings(**settings)
+    assert (s.stop_distance, s.wide_stop) == (start, wide)
+
+
+@pytest.mark.parametrize("converge", ["often", 0.0, -0.1, float("nan"), float("inf")])
+def test_a_converge_that_is_neither_auto_nor_positive_is_refused(converge):
+    with pytest.raises(InputError, match="--converge"):
+        Settings(converge=converge)
+
+
+def test_a_solve_widens_its_stop_on_a_spread_scene_and_keeps_it_on_a_point_scene():
+    """Through the solver, --iters auto: a piecewise scene stops at CONVERGE_WIDE and says so in its attributes; three
+    lit voxels (point-like) stop at CONVERGE; a tolerance the user gives is kept; a warm start from the first
+    solve's state, whose weights it carries, reads no probe and keeps CONVERGE."""
+    points = np.zeros((8, 48, 64), np.float32)
+    for band, y, x in ((1, 20, 20), (4, 30, 40), (6, 15, 45)):
+        points[band, y, x] = 1.0
+    spread = simulate("piecewise", (48, 64), 8, seed=0)
+    point = simulate("points", (48, 64), 8, seed=0, cube=points)
+    wide = reconstruct(spread.measurement, spread.calibration)
+    assert wide.attrs["mean_over_peak"] >= Admm.point_like_below and wide.attrs["stop_tolerance"] == CONVERGE_WIDE
+    assert wide.stop_reason == "converged" and wide.attrs["distance_estimate"] < CONVERGE_WIDE
+    narrow = reconstruct(point.measurement, point.calibration)
+    assert narrow.attrs["mean_over_peak"] < Admm.point_like_below and narrow.attrs["stop_tolerance"] == CONVERGE
+    assert narrow.stop_reason == "converged" and narrow.attrs["distance_estimate"] < CONVERGE
+    kept = reconstruct(spread.measurement, spread.calibration, converge=0.07)
+    assert kept.attrs["stop_tolerance"] == 0.07 and kept.iterations > wide.iterations
+    warm = Solver(spread.calibration).solve(spread.measurement, state=wide.state)       # weights carried: no probe
+    assert "mean_over_peak" not in warm.attrs and warm.attrs["stop_tolerance"] == CONVERGE

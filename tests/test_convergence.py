@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from clsdcam.solve.convergence import RATIOS, WINDOW, DistanceEstimate
+from clsdcam.solve.driver import Rules
 from test_driver import Quadratic
 
 
@@ -60,3 +61,32 @@ def test_the_driver_stops_converged_within_the_tolerance_of_the_limit(converge):
 def test_without_the_rule_no_record_carries_a_distance():
     result = Quadratic(1).run(iters=50)
     assert result.stop_reason == "iterations" and not any("distance" in r for r in result.history)
+
+
+@pytest.mark.parametrize("converge, wider, after", [
+    (1e-3, 1e-2, 1e-2),          # widened
+    (1e-2, 1e-3, 1e-2),          # never narrowed
+    (0.0, 1e-2, 0.0),            # a rule that is off stays off
+])
+def test_the_drivers_stop_widens_and_never_narrows_or_turns_on(converge, wider, after):
+    problem = Quadratic(3, m=40, n=40, mu=1e-2)
+    driver, functions = problem.driver()
+    driver.rules = Rules(converge=converge)
+    driver.widen_stop(wider)
+    assert driver.rules.converge == after
+
+
+def test_a_widened_stop_stops_the_same_run_sooner():
+    """From the iteration it is widened, the driver stops at the wider tolerance: the run that widens at
+    iteration 20 stops where the run at the wide tolerance does, earlier than the one at the narrow tolerance."""
+    problem = Quadratic(3, m=40, n=40, mu=1e-2)
+    stops = {}
+    for name, (converge, wider) in {"narrow": (1e-5, None), "wide": (1e-3, None), "widened": (1e-5, 1e-3)}.items():
+        driver, functions = problem.driver()
+        driver.rules = Rules(converge=converge)
+        driver.run(functions, 20)
+        if wider:
+            driver.widen_stop(wider)
+        assert driver.run(functions, 20000) == "converged"
+        stops[name] = driver.iterations
+    assert stops["widened"] == stops["wide"] < stops["narrow"]

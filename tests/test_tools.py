@@ -25,7 +25,8 @@ import weight_oracles  # noqa: E402
 import weight_rejudge  # noqa: E402
 from clsdcam.metrics import psnr, spectral_angle  # noqa: E402
 from clsdcam.solve.auto_weights import AUTO_AT  # noqa: E402
-from clsdcam.solve.settings import AUTO_CAP  # noqa: E402
+from clsdcam.algorithms.admm import Admm  # noqa: E402
+from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE  # noqa: E402
 from clsdcam.solve.solver import Settings, Solver  # noqa: E402
 
 
@@ -236,6 +237,10 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
     assert [s["reference"] for s in again["scenes"]] == [s["reference"] for s in first["scenes"]]
     text, progress = capsys.readouterr()
     assert again["converge"] == 1e9 and "the default at --converge 1e+09" in text
+    assert {s["default"]["tolerance"] for s in again["scenes"]} == {1e9} and "converged at 1e+09 |" in text
+    assert all(s["default"]["tolerance"] in (CONVERGE, CONVERGE_WIDE) for s in first["scenes"])
+    assert all((s["default"]["tolerance"] == CONVERGE_WIDE) == (s["default"]["mean_over_peak"] >= Admm.point_like_below)
+               for s in first["scenes"])
     assert f"the default's {bench_converged.AUTO_AT + 4 * 25} iterations (converged)" in progress
     assert "reference" not in progress                  # read from the cache: no solve to report
     assert [s["default"]["iterations"] for s in again["scenes"]] == [bench_converged.AUTO_AT + 4 * 25] * 2

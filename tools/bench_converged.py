@@ -80,7 +80,8 @@ def timed_solve(sim, fields: dict, marks=(), x0=None) -> tuple:
 def final_point(sim, result, seconds: float) -> dict:
     return {"psnr": psnr(result.cube, sim.truth), "angle": spectral_angle(result.cube, sim.truth),
             "seconds": seconds, "iterations": result.iterations, "stop_reason": result.stop_reason,
-            "estimate": result.attrs.get("distance_estimate")}
+            "estimate": result.attrs.get("distance_estimate"), "tolerance": result.attrs.get("stop_tolerance"),
+            "mean_over_peak": result.attrs.get("mean_over_peak")}
 
 
 def curve(sim, result) -> list[dict]:
@@ -311,9 +312,15 @@ def scene_rows(results: dict) -> list[str]:
     for s in results["scenes"]:
         m, d = s["margins"], s["default"]
         rows.append(f"| {s['index']} | {s['kind']} | {s['level']} | {s['tv']:.3g} | {pair(s['reference'])} | "
-                    f"{pair(s['today'])} | {pair(d)} | {d['iterations']}, {d['stop_reason']} | "
+                    f"{pair(s['today'])} | {pair(d)} | {d['iterations']}, {stop_words(d)} | "
                     f"{m['time_ratio']:.2f} | {m['answer_db']:+.2f} dB / {m['answer_deg']:+.2f}° |")
     return rows
+
+
+def stop_words(point: dict) -> str:
+    """Why a run stopped, with the tolerance where it stopped "converged" ("converged at 0.1")."""
+    tolerance = point.get("tolerance")
+    return point["stop_reason"] + (f" at {tolerance:g}" if tolerance and point["stop_reason"] == "converged" else "")
 
 
 def pair(point: dict) -> str:

@@ -179,14 +179,16 @@ def add_solver_options(p: argparse.ArgumentParser):
     """The solver's options: iterations, one weight per prior of the table, stopping rules, skips, backend."""
     from ..algorithms import ALGORITHMS
     from ..solve.priors import PRIORS
-    from ..solve.settings import AUTO_CAP, CONVERGE, DEFAULT_ITERS
+    from ..solve.auto_weights import AUTO_AT
+    from ..solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE, DEFAULT_ITERS
 
     p.add_argument("--iters", type=iteration_count, default=DEFAULT_ITERS, metavar="N|auto",
                    help=f"iterations: a number, or auto (the default): until the estimated distance to the converged "
                         f"cube is below --converge, at most {AUTO_CAP}")
-    p.add_argument("--converge", type=number, default=CONVERGE, metavar="D",
+    p.add_argument("--converge", type=weight(True), default="auto", metavar="D|auto",
                    help=f"with --iters auto: stop when the estimated relative distance to the converged cube is below "
-                        f"D (default {CONVERGE:g}; docs/convergence.md)")
+                        f"D; auto (the default): {CONVERGE:g}, or {CONVERGE_WIDE:g} once iteration {AUTO_AT} shows a scene "
+                        f"that is not point-like (docs/convergence.md)")
     p.add_argument("--algorithm", default="auto", choices=("auto",) + tuple(ALGORITHMS),
                    help="the algorithm the solve runs: fista (FISTA with adaptive restart), admm (ADMM with "
                         "closed-form steps: fewer iterations, band space only, --tv and --l1 only), or auto (the "

@@ -151,7 +151,9 @@ def stop_text(result) -> str:
         return result.stop_reason
     close = (f"about {100 * distance:.2g}% from the converged cube" if distance < float("inf")
              else "its distance to the converged cube not yet known")
-    return f"{result.stop_reason}, {close} by its own estimate (--converge {result.attrs['converge']:g})"
+    tolerance = f"{result.attrs['stop_tolerance']:g}"
+    converge = f"auto: {tolerance}" if result.attrs["converge"] == "auto" else tolerance
+    return f"{result.stop_reason}, {close} by its own estimate (--converge {converge})"
 
 
 def poor_fit_warning(result, fit: float) -> str:

@@ -14,7 +14,12 @@ iterate; a lit fraction, it grows on smaller sensors (docs/convergence.md, "A li
 good light"). Each algorithm's threshold, ``Algorithm.point_like_below``, is its own: FISTA's early iterate is
 blurrier. Below it, a rule with a ``point_noise`` lightens the weight in good light
 (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`). A warm start from a cube (``x0``) reads its own iterate there;
-a dark iterate counts as p = 1."""
+a dark iterate counts as p = 1.
+
+At or above it, the automatic stop may widen its tolerance (``wide_stop``, ``--converge auto``): the scenes the
+probe passes reach the model's answer, within the rules of docs/convergence.md, at a distance of 0.1 where the
+point-like ones need 0.05 ("The stop widened where the scene is not point-like"). Where the probe does not run (no
+auto weight, or an algorithm without a threshold) the tolerance stays."""
 from __future__ import annotations
 
 from .noise import residual_noise
@@ -25,9 +30,10 @@ AUTO_AT = 30               # auto weights are chosen from the noise of this iter
 class AutoWeights:
     """The auto-weighted priors of one solve, chosen once at AUTO_AT."""
 
-    def __init__(self, priors: list, point_like_below: float = 0.0):
+    def __init__(self, priors: list, point_like_below: float = 0.0, wide_stop: float | None = None):
         self.priors = priors
         self.point_like_below = point_like_below      # the algorithm's threshold on p (0: never point-like)
+        self.wide_stop = wide_stop                    # the stop's tolerance where p passes (None: it stays)
         self.chosen: dict = {}          # what was chosen, for the result's attributes
 
     def due_in(self, done: int, iters: int) -> int | None:
@@ -48,6 +54,10 @@ class AutoWeights:
                         + ")")
         self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)
+        if self.wide_stop and "mean_over_peak" in self.chosen and not point_like:
+            driver.widen_stop(self.wide_stop)
+            driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "
+                        f"{self.chosen['mean_over_peak']:.2g} ≥ {self.point_like_below:g})")
 
     def _point_like(self, problem, x) -> bool:
         """Whether the iterate's window has p = mean/max below the algorithm's threshold (p kept as the attribute

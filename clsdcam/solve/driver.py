@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterable
 
 from ..algorithms import ALGORITHMS
@@ -122,6 +122,12 @@ class Driver:
         self.algorithm.step = step
         self.checkpoints.enter(objective, evaluate)
         self.estimate.restart()
+
+    def widen_stop(self, converge: float):
+        """Stop from now on when the estimated distance is below ``converge`` (the rules' own where that is wider,
+        or where the rule is off)."""
+        if 0 < self.rules.converge < converge:
+            self.rules = replace(self.rules, converge=converge)
 
     def rescore(self, objective):
         """Go on from the same iterates, momentum and step under another objective (e.g. auto weights chosen)."""

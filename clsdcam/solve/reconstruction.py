@@ -72,7 +72,7 @@ class Reconstruction:
         driver = Driver(algorithm, rules, None if start.basis is not None else spaces.band.objective, observers)
         off = [row.name for row in PRIORS if row.name not in {p.name for p in priors}]
         driver.note(field_line(solver.geometry), self._bands_line(), terms_line(off))
-        weights = AutoWeights(priors, algorithm.point_like_below)
+        weights = AutoWeights(priors, algorithm.point_like_below, s.wide_stop)
         phases = Phases(driver, spaces, s, iters or s.budget, (weights,), self._fit_rule(driver, stop_at_fit))
         reason = phases.run(start.warm, start.basis, start.core)
         weights.unchosen(driver)
@@ -84,6 +84,7 @@ class Reconstruction:
         out.attrs.update(relative_residual=fit, residual_to_noise=structure)
         if rules.converge:
             out.attrs["distance_estimate"] = driver.history[-1]["distance"] if driver.history else math.inf
+            out.attrs["stop_tolerance"] = driver.rules.converge
         out.snapshots = copies.kept
         carry = algorithm.carry()
         factor = self.units.cube_factor

@@ -18,6 +18,7 @@ from .priors import AUTO, PRIORS
 DEFAULT_ITERS = AUTO  # iterate until converged (``converge``), at most AUTO_CAP
 AUTO_CAP = 3000       # the most iterations an automatic stop runs (the panel's references' length, docs/convergence.md)
 CONVERGE = 0.05       # the estimated relative distance to the limit an automatic stop stops at (docs/convergence.md)
+CONVERGE_WIDE = 0.1   # --converge auto's, once the point-like probe reads a scene that is not point-like
 COLD_ITERS = 40     # a stream's cold start (a batch chunk's first frame): what reached a cold solve's accuracy (with --subspace, docs/batch.md)
 DEFAULT_TOL = 0.0
 
@@ -27,7 +28,8 @@ class SolverSettings:
     """The fields that are not prior weights."""
 
     iters: int | str = DEFAULT_ITERS   # a count, or "auto": until converged, at most AUTO_CAP
-    converge: float = CONVERGE     # with iters "auto": stop when the estimated distance to the limit is below this
+    converge: float | str = AUTO   # with iters "auto": stop when the estimated distance to the limit is below this;
+    #                                 auto: CONVERGE, widened to CONVERGE_WIDE where the probe at AUTO_AT allows
     algorithm: str = "auto"        # a name of clsdcam.algorithms.ALGORITHMS, or "auto" (resolved on construction)
     tv_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)  # x, y, λ
     tol: float = DEFAULT_TOL
@@ -52,7 +54,8 @@ class SolverSettings:
                  f"--algorithm {self.algorithm!r}: expected one of {', '.join(ALGORITHMS)}")
         _require(_finite_nonneg(self.step_scale) and self.step_scale > 0, f"step_scale {self.step_scale}: must be > 0")
         _require(_is_int(self.rank) and self.rank >= 0, f"--rank {self.rank}: must be an integer ≥ 0")
-        _require(_finite_nonneg(self.converge) and self.converge > 0, f"--converge {self.converge}: must be > 0")
+        _require(self.converge == AUTO or (_finite_nonneg(self.converge) and self.converge > 0),
+                 f"--converge {self.converge}: must be auto or a number > 0")
         for name in ("tol", "plateau"):
             value = getattr(self, name)
             _require(_finite_nonneg(value), f"--{name} {value}: must be a finite number ≥ 0")
@@ -74,8 +77,18 @@ class SolverSettings:
 
     @property
     def stop_distance(self) -> float:
-        """The driver's ``converge`` rule: ``converge`` when ``iters`` is "auto", else 0 (off)."""
-        return self.converge if self.iters == AUTO else 0.0
+        """The driver's ``converge`` rule at the start: ``converge`` (CONVERGE for auto) when ``iters`` is "auto",
+        else 0 (off)."""
+        if self.iters != AUTO:
+            return 0.0
+        return CONVERGE if self.converge == AUTO else self.converge
+
+    @property
+    def wide_stop(self) -> float | None:
+        """The tolerance the stop may widen to once the point-like probe reads a scene that is not point-like
+        (:class:`clsdcam.solve.auto_weights.AutoWeights`): CONVERGE_WIDE with ``--iters auto --converge auto``,
+        else None (the tolerance stays)."""
+        return CONVERGE_WIDE if self.iters == AUTO and self.converge == AUTO else None
 
     def _auto_algorithm(self) -> str:
         """``--algorithm auto``: for a solve run until converged (``--iters auto``), the first algorithm that declares
