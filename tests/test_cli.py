@@ -185,7 +185,7 @@ def test_batch_help_lists_only_what_batch_takes(capsys):
 def test_a_bad_number_names_the_option_not_an_internal_type(simulated, tmp_path, capsys):
     assert run_reconstruct(simulated, tmp_path / "o.h5", "--tv", "abc") == 2
     err = capsys.readouterr().err
-    assert "--tv" in err and "'abc' is not a number" in err and "_number" not in err
+    assert "--tv" in err and "'abc' is not a number or auto" in err and "_number" not in err
 
 
 def test_bare_command_lists_the_commands(capsys):

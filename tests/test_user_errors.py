@@ -230,6 +230,8 @@ def test_missing_output_folders_are_created_when_written_and_not_on_bad_input(si
     assert main(["reconstruct", str(nan), "--calibration", calibration, "-o", str(tmp_path / "new/sub/o.h5")]) == 2
     assert main(["calibrate", "psf", str(nan), "-o", str(tmp_path / "new/sub/c.h5")]) == 2
     assert main(["simulate", str(tmp_path / "new/sub"), *SIZE, "--noise", "-1"]) == 2
+    for solver_option in (["--converge", "0"], ["--tv", "-1"]):    # refused before the demo writes its simulation
+        assert main(["demo", str(tmp_path / "new/sub"), *SIZE, *solver_option]) == 2
     assert not (tmp_path / "new").exists()
     assert main(["reconstruct", str(sim / "measurement.npy"), "--calibration", calibration, "--iters", "1",
                  "--quiet", "-o", str(tmp_path / "new/sub/o.h5")]) == 0

@@ -6,7 +6,7 @@ import time
 from pathlib import Path
 
 from ..errors import shape_text
-from .options import WORK, add_simulation_options, add_solver_options, examples, iterations
+from .options import WORK, add_simulation_options, add_solver_options, examples, iterations, settings_from
 from .simulate import simulation_kwargs
 from .solve import print_accuracy, solve, write
 
@@ -49,6 +49,7 @@ def run(args) -> int:
     from .show import draw
 
     fill_defaults(args)
+    settings_from(args)                 # a bad solver option is refused before the simulation is written
     outdir = Path(args.outdir)
     check_output(outdir / "cube.h5", "demo folder")
     start = time.perf_counter()

@@ -106,7 +106,12 @@ def iteration_count(text: str):
 def weight(auto: bool):
     """An argparse type: a number, or ``auto`` when the prior has an auto rule."""
     def parse(text: str):
-        return text if auto and text == "auto" else number(text)
+        if not auto:
+            return number(text)
+        try:
+            return text if text == "auto" else number(text)
+        except argparse.ArgumentTypeError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number or auto") from None
 
     return parse
 
@@ -187,8 +192,8 @@ def add_solver_options(p: argparse.ArgumentParser):
                         f"cube is below --converge, at most {AUTO_CAP}")
     p.add_argument("--converge", type=weight(True), default="auto", metavar="D|auto",
                    help=f"with --iters auto: stop when the estimated relative distance to the converged cube is below "
-                        f"D; auto (the default): {CONVERGE:g}, or {CONVERGE_WIDE:g} once iteration {AUTO_AT} shows a scene "
-                        f"that is not point-like (docs/convergence.md)")
+                        f"D; auto (the default): {CONVERGE:g}, or {CONVERGE_WIDE:g} once iteration {AUTO_AT} shows a "
+                        f"scene that is not point-like (docs/convergence.md)")
     p.add_argument("--algorithm", default="auto", choices=("auto",) + tuple(ALGORITHMS),
                    help="the algorithm the solve runs: fista (FISTA with adaptive restart), admm (ADMM with "
                         "closed-form steps: fewer iterations, band space only, --tv and --l1 only), or auto (the "
