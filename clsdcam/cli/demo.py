@@ -49,7 +49,7 @@ def run(args) -> int:
     from .show import draw
 
     fill_defaults(args)
-    settings_from(args)                 # a bad solver option is refused before the simulation is written
+    settings = settings_from(args)      # a bad solver option is refused before the simulation is written
     outdir = Path(args.outdir)
     check_output(outdir / "cube.h5", "demo folder")
     start = time.perf_counter()
@@ -57,7 +57,7 @@ def run(args) -> int:
     files = write_simulation(outdir, sim)
     print(f"simulated scene {sim.scene!r}, {shape_text(sim.truth.shape)}, in {time.perf_counter() - start:.1f} s")
     args.output, args.png = str(outdir / "cube.h5"), None    # the pictures are drawn below, with the input's
-    result = solve(args, sim.calibration, sim.measurement, snapshots=args.report_at)
+    result = solve(args, sim.calibration, sim.measurement, snapshots=args.report_at, settings=settings)
     result.attrs.update(provenance({name: files[name].resolve() for name in ("measurement", "calibration")}))
     code = write(args, result, sim.truth)
     draw(outdir / "cube", result.cube, result.wavelengths, result.history, sim.truth, None,

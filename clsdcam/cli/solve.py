@@ -11,11 +11,12 @@ from ..errors import InputError, shape_text
 from .options import settings_from
 
 
-def solve(args, calibration, measurement, snapshots=()):
-    """Build the solver and run it with a progress bar; Ctrl-C without --save-on-interrupt propagates."""
+def solve(args, calibration, measurement, snapshots=(), settings=None):
+    """Build the solver (with ``settings``, by default the options') and run it with a progress bar; Ctrl-C without
+    --save-on-interrupt propagates."""
     from ..solve.solver import Solver
 
-    settings = settings_from(args)
+    settings = settings or settings_from(args)
     solver = Solver(calibration, backend=chosen_backend(args, settings.algorithm), device=args.device,
                     settings=settings, fft=args.fft, path=args.path)
     be = solver.backend
