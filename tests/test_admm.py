@@ -242,6 +242,47 @@ def test_the_balance_sets_each_axis_threshold_from_the_iterates_differences_and_
     assert split._inverse is split.terms.for_penalties(new, split.axes)[2]
 
 
+def test_a_new_nonneg_penalty_keeps_the_unscaled_dual_and_the_right_hand_side_it_implies(tiny):
+    """repenalise (a point-like scene's μ₃): μ₃ times the factor, the unscaled dual μ₃ρ as before, ``rest`` the new
+    μ₃'(w − ρ') where it was μ₃(w − ρ), every other array untouched; the divisors and the state's penalties the new."""
+    model, split = tiny
+    state = random_state(split)
+    old = split.penalties
+    state.rest[...] = old.nonneg * (state.w - state.rho)          # what the last w-step left
+    before = {name: getattr(state, name).copy() for name in ("v", "hv", "x", "xi", "w", "eta", "s")}
+    unscaled = old.nonneg * state.rho
+    new = balance.repenalise(split, state, model.backend, 0.3)
+    assert new.nonneg == pytest.approx(0.3 * old.nonneg, rel=1e-15) and new.tv_balance == old.tv_balance
+    assert np.allclose(new.nonneg * state.rho, unscaled, rtol=1e-12, atol=1e-15)
+    assert np.allclose(state.rest, new.nonneg * (state.w - state.rho), rtol=1e-12, atol=1e-14)
+    assert all(np.array_equal(getattr(state, name), value) for name, value in before.items())
+    assert state.penalties is new and split.penalties is new
+    assert split._inverse is split.terms.for_penalties(new, split.axes)[2]
+
+
+def test_a_new_nonneg_penalty_leaves_the_fixed_point_where_it_is(tiny):
+    """ADMM's fixed point (the splits and the unscaled duals) does not depend on μ₃: a state at it, carried to another
+    μ₃ by repenalise, stays there (w moves by round-off), where the same state with ``rest`` left at the old μ₃, or
+    started afresh (zero duals) at the new one, leaves it."""
+    model, split = tiny
+    state, _ = split.start(np.zeros(split.shape))
+    for _ in range(3000):
+        split.iterate(state)
+    at = state.w.copy()
+    moved = lambda s: np.linalg.norm(s.w - at) / np.linalg.norm(at)
+    split.iterate(state)
+    assert moved(state) < 1e-12                                    # converged
+    stale, _ = split.start(at)
+    for name in ("v", "hv", "x", "xi", "rho", "w", "eta", "s", "rest"):
+        getattr(stale, name)[...] = getattr(state, name)
+    balance.repenalise(split, state, model.backend, 0.3)
+    stale.rho[...] = state.rho                                    # the dual carried, the right-hand side not
+    fresh, _ = split.start(at)
+    for s in (state, stale, fresh):
+        split.iterate(s)
+    assert moved(state) < 1e-10 and moved(stale) > 1e-4 and moved(fresh) > 1e-4
+
+
 def test_the_balance_holds_each_axis_within_its_range_and_leaves_a_flat_axis(tiny):
     """A cube flat along λ keeps β_λ; the other axes' β_d are held within [1/BALANCE_RANGE, BALANCE_RANGE]."""
     model, split = tiny

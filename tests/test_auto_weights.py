@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from clsdcam.algorithms.admm import Admm
+from clsdcam.algorithms.admm.algorithm import NONNEG, NONNEG_POINT_LIKE, TV
 from clsdcam.solve.auto_weights import AUTO_AT, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
@@ -34,8 +35,8 @@ def test_nothing_is_due_without_an_auto_weight():
 
 
 class Residual:
-    """A problem whose residual is white noise of σ (0.01) and whose iterate's window is ``cube``, and a driver that
-    records what it is asked (its stop the driver's own, at CONVERGE)."""
+    """A problem whose residual is white noise of σ (0.01) and whose iterate's window is ``cube``, and a driver (and
+    its algorithm) that records what it is asked (its stop the driver's own, at CONVERGE)."""
 
     backend = BACKEND
     rules = Rules(converge=CONVERGE)
@@ -44,7 +45,7 @@ class Residual:
     def __init__(self, sigma: float = 0.01, cube=None):
         self.residual_buffer = np.random.default_rng(0).normal(0, sigma, (256, 256))
         self.x, self.iterations, self.rescored, self.notes = None, AUTO_AT, [], []
-        self.cube, self.model = cube, self
+        self.cube, self.model, self.algorithm, self.told_point_like = cube, self, self, 0
 
     def solution(self, x):
         return self.cube
@@ -63,6 +64,9 @@ class Residual:
 
     def note(self, *lines):
         self.notes += lines
+
+    def point_like(self):
+        self.told_point_like += 1
 
 
 def test_act_chooses_from_the_noise_and_rescores():
@@ -112,18 +116,20 @@ def test_act_reads_how_point_like_the_iterate_is(cube, mean_over_peak, point_lik
     if point_like:
         assert prior.relative < prior.auto_weight.for_noise(noise)
     assert ("a point-like scene" in stand_in.notes[0]) == point_like
+    assert stand_in.told_point_like == point_like          # the algorithm is told, once
 
 
 def test_an_algorithm_without_a_threshold_is_never_point_like():
     weights, stand_in = hook(), Residual(sigma=0.003, cube=one_lit_pixel())
     weights.act(stand_in, stand_in)
-    assert "mean_over_peak" not in weights.chosen
+    assert "mean_over_peak" not in weights.chosen and not stand_in.told_point_like
     assert weights.priors[0].relative == pytest.approx(weights.priors[0].auto_weight.for_noise(0.003), rel=0.05)
 
 
 def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene():
     """Through the solver: ADMM's 30-iteration cube (the sensor window it returns) is what ``mean_over_peak`` reads,
-    three lit voxels in good light count as point-like and take the lighter weight; FISTA reads nothing."""
+    three lit voxels in good light count as point-like and take the lighter weight, and ADMM its point-like
+    non-negativity penalty; FISTA reads nothing."""
     cube = np.zeros((8, 48, 64), np.float32)
     for band, y, x in ((1, 20, 20), (4, 30, 40), (6, 15, 45)):
         cube[band, y, x] = 1.0
@@ -134,6 +140,8 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene():
     assert admm.attrs["mean_over_peak"] < Admm.point_like_below == 0.0025 and noise < rule.point_noise
     assert admm.attrs["tv_chosen"] == pytest.approx(rule.for_noise(noise, True))
     assert rule.for_noise(noise, True) < 0.5 * rule.for_noise(noise)
+    penalties = admm.state.carry[0].penalties          # μ₂ and μ₃ share their scale (penalties_for)
+    assert penalties.nonneg / penalties.tv == pytest.approx(NONNEG_POINT_LIKE / TV, rel=1e-12)
     fista = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="fista")
     assert "mean_over_peak" not in fista.attrs
     assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))
@@ -177,9 +185,9 @@ def test_a_converge_that_is_neither_auto_nor_positive_is_refused(converge):
 
 
 def test_a_solve_widens_its_stop_on_a_spread_scene_and_keeps_it_on_a_point_scene():
-    """Through the solver, --iters auto: a piecewise scene stops at CONVERGE_WIDE and says so in its attributes; three
-    lit voxels (point-like) stop at CONVERGE; a tolerance the user gives is kept; a warm start from the first
-    solve's state, whose weights it carries, reads no probe and keeps CONVERGE."""
+    """Through the solver, --iters auto: a piecewise scene stops at CONVERGE_WIDE and says so in its attributes, and
+    keeps ADMM's non-negativity penalty; three lit voxels (point-like) stop at CONVERGE; a tolerance the user gives is
+    kept; a warm start from the first solve's state, whose weights it carries, reads no probe and keeps CONVERGE."""
     points = np.zeros((8, 48, 64), np.float32)
     for band, y, x in ((1, 20, 20), (4, 30, 40), (6, 15, 45)):
         points[band, y, x] = 1.0
@@ -187,6 +195,7 @@ def test_a_solve_widens_its_stop_on_a_spread_scene_and_keeps_it_on_a_point_scene
     point = simulate("points", (48, 64), 8, seed=0, cube=points)
     wide = reconstruct(spread.measurement, spread.calibration)
     assert wide.attrs["mean_over_peak"] >= Admm.point_like_below and wide.attrs["stop_tolerance"] == CONVERGE_WIDE
+    assert wide.state.carry[0].penalties.nonneg / wide.state.carry[0].penalties.tv == pytest.approx(NONNEG / TV)
     assert wide.stop_reason == "converged" and wide.attrs["distance_estimate"] < CONVERGE_WIDE
     narrow = reconstruct(point.measurement, point.calibration)
     assert narrow.attrs["mean_over_peak"] < Admm.point_like_below and narrow.attrs["stop_tolerance"] == CONVERGE

@@ -458,6 +458,11 @@ def test_admm_splits_tv_adjoint_and_division_match_numpy(dtype, axes, path):
     for split, state in zip(pair, (ref, got)):
         split.rescale_tv_duals(state, {0: 0.3, 1: 2.5, 2: 1.1})
     assert_states_match(ref, got, backend, tolerance)
+    from clsdcam.algorithms.admm.balance import repenalise
+
+    for split, state, be in zip(pair, (ref, got), (NumpyBackend(dtype), backend)):
+        repenalise(split, state, be, 0.3)
+    assert_states_match(ref, got, backend, tolerance)
 
 
 def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_memory):

@@ -84,6 +84,10 @@ class Algorithm:
         """Every iterate through ``mapping`` (into another space), momentum kept."""
         raise InputError(f"--algorithm {self.name} runs in band space: no --subspace or --rank")
 
+    def point_like(self) -> None:
+        """The auto weights' probe found the scene point-like (:mod:`clsdcam.solve.auto_weights`): an algorithm with
+        a setting of its own for such scenes takes it (ADMM: a lighter non-negativity penalty). Nothing by default."""
+
     def carry(self):
         """What a video's next frame resumes from besides its iterate (:class:`clsdcam.solve.state.SolverState`), or
         None: an algorithm with more state than its iterates (ADMM's splits and duals) returns it."""

@@ -16,6 +16,7 @@ blurrier. Below it, a rule with a ``point_noise`` lightens the weight in good li
 (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`). A warm start from a cube (``x0``) reads its own iterate there;
 a dark iterate counts as p = 1.
 
+Below it, too, the algorithm is told (``Algorithm.point_like``: ADMM lightens its non-negativity penalty).
 At or above it, the automatic stop may widen its tolerance (``wide_stop``, ``--converge auto``): the scenes the
 probe passes reach the model's answer, within the rules of docs/convergence.md, at a distance of 0.1 where the
 point-like ones need 0.05 ("The stop widened where the scene is not point-like"). Where the probe does not run (no
@@ -54,6 +55,8 @@ class AutoWeights:
                         + ")")
         self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)
+        if point_like:
+            driver.algorithm.point_like()
         if self.wide_stop and "mean_over_peak" in self.chosen and not point_like:
             driver.widen_stop(self.wide_stop)
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "

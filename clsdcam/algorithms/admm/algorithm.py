@@ -9,7 +9,8 @@ The iterate the driver sees is w, the non-negative copy of v. The penalties star
 scales (so a brighter scene, another PSF normalisation or filter gain needs no new values): μ₁ = ``DATA``·mean‖f_p‖²,
 μ₂ = ``TV``·μ₁·max|Ĥ|², μ₃ = ``NONNEG``·μ₁·max|Ĥ|² (:func:`penalties_for`; how they were chosen, and why residual
 balancing is not used: docs/admm.md). After ``BALANCE_AT`` iterations the TV split's is set along each axis from the
-iterate's differences, once (:mod:`.balance`).
+iterate's differences, once (:mod:`.balance`); where the auto weights' probe finds the scene point-like (at the same
+iteration), the non-negativity split's drops to ``NONNEG_POINT_LIKE`` (:meth:`Admm.point_like`).
 
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
@@ -34,6 +35,9 @@ if TYPE_CHECKING:                 # the parser lists the algorithms: the steps' 
 # (docs/convergence.md, "A faster ADMM"); docs/admm.md has the first choice, made for the first 100 iterations
 DATA, TV, NONNEG = 1e-2, 1e-2, 1e-2
 RELAXATION = 1.7
+# μ₃'s constant on a point-like scene, from the probe's iteration on: the narrow-line scenes reach the model's answer
+# in half the iterations or less (docs/convergence.md, "A lighter non-negativity penalty for point-like scenes")
+NONNEG_POINT_LIKE = 3e-3
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
 # mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64
 # panels' lines scenes, 0.0035–0.21 on their other 80 (docs/convergence.md, "A lighter weight for point-like scenes")
@@ -128,6 +132,14 @@ class Admm(Algorithm):
             self._start = self.backend.copy(point)
             return
         self.state, _ = self.splitting.start(point)
+
+    def point_like(self) -> None:
+        """The scene is point-like (the auto weights' probe, :mod:`clsdcam.solve.auto_weights`): μ₃ from ``NONNEG`` to
+        ``NONNEG_POINT_LIKE`` of the same scale, the solve going on from the same point (:func:`.balance.repenalise`)."""
+        if self.state is not None:
+            from .balance import repenalise
+
+            repenalise(self.splitting, self.state, self.backend, NONNEG_POINT_LIKE / NONNEG)
 
     def carry(self):
         """What the next frame's solve resumes from: the splits and duals (None before the first iteration)."""

@@ -13,6 +13,10 @@ held within a factor ``BALANCE_RANGE`` of the camera's μ₂ (a flat or black cu
 duals μ₂,d·η_d are kept (η_d ← r_d·η_d, s_d ← s_d + (1 − r_d)η_d with r_d = μ₂,d/μ₂,d', so u_d = s_d + η_d stays):
 the iteration goes on from the same point, with one new divisor. The RMS is read on the host (one download of w,
 once per solve), so both backends set the same penalties.
+
+The non-negativity split's penalty is changed the same way (:func:`repenalise`, a point-like scene's): with μ₃ → μ₃',
+the unscaled dual μ₃ρ is kept (ρ ← (μ₃/μ₃')ρ) and the c-step's right-hand side μ₃(w − ρ), which the last w-step left
+in ``rest``, becomes μ₃'(w − ρ') = rest + (μ₃' − μ₃)w.
 """
 from __future__ import annotations
 
@@ -52,6 +56,18 @@ def balance(split: SplittingBase, state: SplitState, w_host: np.ndarray) -> Pena
     old = split.penalties
     new = balanced_penalties(split, difference_rms(split, w_host))
     split.rescale_tv_duals(state, {axis: old.tv_along(axis) / new.tv_along(axis) for axis in split.axes})
+    split.set_penalties(new)
+    state.penalties = new
+    return new
+
+
+def repenalise(split: SplittingBase, state: SplitState, backend, factor: float) -> Penalties:
+    """μ₃ ← ``factor``·μ₃ between two iterations, ρ and ``rest`` carried over (the module docstring) with the backend's
+    vector operations; the state records the penalties. Returns them."""
+    old = split.penalties
+    new = replace(old, nonneg=old.nonneg * factor)
+    backend.scale(old.nonneg / new.nonneg, state.rho, out=state.rho)
+    backend.axpy(new.nonneg - old.nonneg, state.w, state.rest, out=state.rest)
     split.set_penalties(new)
     state.penalties = new
     return new
