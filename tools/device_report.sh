@@ -3,7 +3,7 @@
 # benchmark (every device FFT engine) and the iteration benchmark on one OpenCL device, everything into OUTDIR.
 #
 #   tools/device_report.sh OUTDIR [--device SUBSTRING] [--size HxW] [--bands K] [--repeat N] [--ranks R,..]
-#                                 [--backends LIST] [--no-install]
+#                                 [--backends LIST] [--no-install] [--tests] [--demo] [--panel N]
 #
 # The device: --device (a substring of its platform or device name, as `clsdcam --device`), else PYOPENCL_CTX, else
 # the first GPU, else the first CPU (clsdcam.backends.cl_devices.choose_device); every step runs on it through
@@ -13,6 +13,10 @@
 #   tools/device_report.sh /tmp/report --device Intel --size 32x48 --bands 8 --repeat 1 --no-install
 # The iteration benchmark runs --backends: opencl by default; numpy,opencl adds NumPy's rows, which take minutes at
 # full size (on the 16-core host of an H200 they had not finished after 150 s).
+# Then, when asked, the checks that need a GPU (issue 47): --tests the parity and device-check tests on the device;
+# --demo `clsdcam demo` as today's default (300 FISTA iterations) and as the default, one after the other (their
+# folders in a scratch directory: a full-size cube is 37 MB); --panel N a fresh N-scene panel of tools/bench_converged.py
+# at --size/--bands on the device (OUTDIR/panel, its references cached in the scratch directory).
 # Python: $PYTHON, else .venv/bin/python, else python3. A failing step is recorded in summary.txt (exit code, log)
 # and the next one still runs; the script's own exit code is the number of failed steps.
 set -uo pipefail
@@ -21,7 +25,7 @@ cd "$(dirname "$0")/.."
 usage() { sed -n '5,6p' "$0" | sed 's/^# *//' >&2; exit 2; }
 [ $# -ge 1 ] && [ "${1#-}" = "$1" ] || usage
 OUT=$1; shift
-DEVICE="" SIZE=320x448 BANDS=64 REPEAT=3 RANKS=3,8 BACKENDS=opencl INSTALL=1
+DEVICE="" SIZE=320x448 BANDS=64 REPEAT=3 RANKS=3,8 BACKENDS=opencl INSTALL=1 TESTS=0 DEMO=0 PANEL=0
 while [ $# -gt 0 ]; do
     case $1 in
         --device) DEVICE=$2; shift 2 ;;
@@ -31,6 +35,9 @@ while [ $# -gt 0 ]; do
         --ranks) RANKS=$2; shift 2 ;;
         --backends) BACKENDS=$2; shift 2 ;;
         --no-install) INSTALL=0; shift ;;
+        --tests) TESTS=1; shift ;;
+        --demo) DEMO=1; shift ;;
+        --panel) PANEL=$2; shift 2 ;;
         *) usage ;;
     esac
 done
@@ -51,7 +58,8 @@ step() {
 }
 
 { echo "device report, $(date -u '+%Y-%m-%d %H:%M UTC'), commit $(git rev-parse --short HEAD 2>/dev/null)"
-  echo "options: device=${DEVICE:-auto} size=$SIZE bands=$BANDS repeat=$REPEAT ranks=$RANKS backends=$BACKENDS"
+  echo "options: device=${DEVICE:-auto} size=$SIZE bands=$BANDS repeat=$REPEAT ranks=$RANKS backends=$BACKENDS" \
+       "tests=$TESTS demo=$DEMO panel=$PANEL"
   echo "machine: $(uname -srm), $(nproc) cores"; } >"$SUMMARY"
 if [ $INSTALL = 1 ]; then
     step install env VKFFT_BACKEND=opencl "$PY" -m pip install -e '.[vkfft]'
@@ -83,5 +91,19 @@ for engine in $("$PY" -c "from clsdcam.backends.fft import available_engines; pr
 done
 step iteration "$PY" tools/bench_iteration.py --size "$SIZE" --bands "$BANDS" --ranks "$RANKS" --repeat "$REPEAT" \
     --backends "$BACKENDS" --no-authors --json "$OUT/iteration.json"
+SCRATCH=$(mktemp -d)
+if [ $TESTS = 1 ]; then
+    step tests "$PY" -m pytest -q -p no:cacheprovider -rs tests/test_parity.py tests/test_devcheck.py
+fi
+if [ $DEMO = 1 ]; then
+    step demo-today "$PY" -m clsdcam demo "$SCRATCH/demo-today" --size "$SIZE" --bands "$BANDS" --iters 300 \
+        --algorithm fista --backend opencl
+    step demo "$PY" -m clsdcam demo "$SCRATCH/demo" --size "$SIZE" --bands "$BANDS" --backend opencl
+fi
+if [ "$PANEL" -gt 0 ]; then
+    step panel "$PY" tools/bench_converged.py --backend opencl --size "$SIZE" --bands "$BANDS" --scenes "$PANEL" \
+        --out "$OUT/panel" --cache "$SCRATCH/cache"
+fi
+rm -rf "$SCRATCH"
 echo "$FAILED step(s) failed; everything is in $OUT" | tee -a "$SUMMARY"
 exit "$FAILED"
