@@ -16,22 +16,38 @@ __kernel void gram(__global ACC *partial, __local ACC *scratch, __global const R
 }
 
 /* bandmix: out[k,p] = Σ_j M[k,j]·x[j,p], a K×J matrix applied along the band axis (j ascending, in REAL):
- * a square mix (low-rank prox), or a spectral basis's expansion (K×r) or projection (r×K).
- * Work item (p, r) computes output bands k = r·ROWS … r·ROWS + ROWS − 1 (those < K) of pixel p: each x[j, p] is
- * read once for ROWS outputs, and neighbouring work items read neighbouring pixels (coalesced on GPUs, vector
- * loads on CPUs); M's entries are the same for every work item of a row of the grid.
- * Grid (p, r) over (⌈K/ROWS⌉, P), dim 0 rounded up. Shapes: x (J,P), out (K,P), M (K,J); out must not alias x. */
+ * a square mix (low-rank prox, ADMM's DCT along λ), or a spectral basis's expansion (K×r) or projection (r×K).
+ * Work item (p, r) computes output bands k = r·ROWS … r·ROWS + ROWS − 1 (those < K) of pixel p. A work-group is
+ * TILE pixels × the row blocks of its dim 1 (all ⌈K/ROWS⌉ of them where the group size allows): it copies x's
+ * TILE columns into local memory, CHUNK bands at a time, once for all its rows, so that each x[j, p] is read from
+ * global memory once per group along dim 1 (not once per row block) and neighbouring work items read neighbouring
+ * pixels (coalesced on GPUs, vector loads on CPUs); M's entries are the same for every work item of a row block.
+ * Grid (p, r) over (⌈P/TILE⌉·TILE, row blocks rounded up to the group), groups (TILE, G); work items past P or K
+ * compute but store nothing. Shapes: x (J,P), out (K,P), M (K,J); out must not alias x. */
 #define BANDMIX_ROWS 8
+#define BANDMIX_TILE 32
+#define BANDMIX_CHUNK 32
 __kernel void bandmix(__global REAL *out, __global const REAL *x, __global const REAL *M, int K, int J, long P)
 {
-    size_t p = get_global_id(0);
+    __local REAL tile[BANDMIX_CHUNK * BANDMIX_TILE];
+    size_t lp = get_local_id(0), p0 = get_group_id(0) * BANDMIX_TILE, p = p0 + lp;
+    size_t me = get_local_id(1) * BANDMIX_TILE + lp, items = get_local_size(1) * BANDMIX_TILE;
     int k0 = get_global_id(1) * BANDMIX_ROWS;
-    if (p >= (size_t)P) return;
     REAL s[BANDMIX_ROWS];
     for (int r = 0; r < BANDMIX_ROWS; ++r) s[r] = 0;
-    for (int j = 0; j < J; ++j) {
-        REAL v = x[(size_t)j * P + p];
-        for (int r = 0; r < BANDMIX_ROWS; ++r) s[r] += M[min(k0 + r, K - 1) * J + j] * v;   /* rows ≥ K: not stored */
+    for (int j0 = 0; j0 < J; j0 += BANDMIX_CHUNK) {
+        size_t chunk = min(BANDMIX_CHUNK, J - j0);
+        barrier(CLK_LOCAL_MEM_FENCE);                       /* every work item is done with the last chunk */
+        for (size_t e = me; e < chunk * BANDMIX_TILE; e += items) {
+            size_t q = p0 + e % BANDMIX_TILE;
+            tile[e] = q < (size_t)P ? x[(size_t)(j0 + e / BANDMIX_TILE) * P + q] : 0;
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+        for (size_t j = 0; j < chunk; ++j) {
+            REAL v = tile[j * BANDMIX_TILE + lp];
+            for (int r = 0; r < BANDMIX_ROWS; ++r) s[r] += M[min(k0 + r, K - 1) * J + j0 + (int)j] * v;  /* rows ≥ K: not stored */
+        }
     }
-    for (int r = 0; r < BANDMIX_ROWS && k0 + r < K; ++r) out[(size_t)(k0 + r) * P + p] = s[r];
+    if (p < (size_t)P)
+        for (int r = 0; r < BANDMIX_ROWS && k0 + r < K; ++r) out[(size_t)(k0 + r) * P + p] = s[r];
 }

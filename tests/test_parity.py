@@ -263,6 +263,18 @@ def test_device_bandmix_uploads_a_matrix_once_and_keeps_the_recently_used(monkey
     assert uploads.count((3, 4)) == 1 and uploads.count((2, 4)) == 2 * code.MATRICES
 
 
+@pytest.mark.parametrize("rows, cols", [(1, 33), (9, 31), (70, 70), (130, 9)])
+def test_device_bandmix_across_tiles_chunks_and_row_blocks(rows, cols):
+    """The device path's bandmix (bandmix.cl) where its work-groups' edges fall: 35 pixels (a tile and a part),
+    inputs of 31, 33 and 70 bands (a local-memory chunk holds 32), outputs of one row block to 17 (130 bands: three
+    groups along the rows, each of 8 blocks)."""
+    rng = np.random.default_rng(rows + cols)
+    x, matrix = rng.standard_normal((cols, 5, 7)).astype(np.float32), rng.standard_normal((rows, cols))
+    be = opencl("float32", "reikna")
+    got = be.to_host(be.bandmix(be.to_device(x), matrix))
+    assert relative_error(got, NumpyBackend("float32").bandmix(x, matrix)) <= 10 * ELEMENTWISE
+
+
 @pytest.mark.parametrize("case", HOST_PATH_CASES)
 def test_host_code_primitives_on_both_paths(case, path):
     assert_case(case, "float32", opencl("float32", PATH_BACKEND[path]), seed=4, tolerance=HOST_PATH_CASES[case])

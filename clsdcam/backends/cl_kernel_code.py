@@ -19,6 +19,8 @@ from .convolution import device_path
 GRAM_PIXELS = 64      # pixels per gram work item (at least)
 GRAM_GROUPS = 4       # gram work-groups per compute unit (at most), each for every (i, j)
 BANDMIX_ROWS = 8      # output bands per bandmix work item (as in bandmix.cl)
+BANDMIX_TILE = 32     # pixels per bandmix work-group (as in bandmix.cl)
+BANDMIX_GROUP = 256   # bandmix work items per group (at most): 8 row blocks, every band of 64
 MATRICES = 8          # bandmix matrices kept on the device (a basis, its transpose, the last moves' mappings)
 
 
@@ -59,13 +61,17 @@ class KernelCode:
         return upper + np.triu(upper, 1).T
 
     def bandmix(self, x, matrix, out=None):
-        """One work item per pixel and BANDMIX_ROWS output bands."""
+        """One work item per pixel and BANDMIX_ROWS output bands; a group of BANDMIX_TILE pixels and as many row
+        blocks as BANDMIX_GROUP allows reads its pixels' x once for them all."""
         be = self.backend
         rows, cols = np.shape(matrix)
         target = be.target(out, (rows,) + x.shape[1:], x)
         pixels = x.size // x.shape[0]
-        be.kernels.grid2("bandmix", pixels, -(-rows // BANDMIX_ROWS), target, x, self._matrix(matrix),
-                         np.int32(rows), np.int32(cols), np.int64(pixels))
+        blocks = -(-rows // BANDMIX_ROWS)
+        per_group = max(1, min(blocks, min(BANDMIX_GROUP, be.kernels.max_group) // BANDMIX_TILE))
+        grid = (-(-pixels // BANDMIX_TILE) * BANDMIX_TILE, -(-blocks // per_group) * per_group)
+        be.kernels.launch("bandmix", grid, (BANDMIX_TILE, per_group), target, x, self._matrix(matrix),
+                          np.int32(rows), np.int32(cols), np.int64(pixels))
         return be.deliver(target, out)
 
     def _matrix(self, matrix):
