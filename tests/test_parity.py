@@ -263,16 +263,30 @@ def test_device_bandmix_uploads_a_matrix_once_and_keeps_the_recently_used(monkey
     assert uploads.count((3, 4)) == 1 and uploads.count((2, 4)) == 2 * code.MATRICES
 
 
+@pytest.mark.parametrize("group", [None, 64])
+@pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("rows, cols", [(1, 33), (9, 31), (70, 70), (130, 9)])
-def test_device_bandmix_across_tiles_chunks_and_row_blocks(rows, cols):
+def test_device_bandmix_across_tiles_chunks_and_row_blocks(rows, cols, dtype, group, monkeypatch):
     """The device path's bandmix (bandmix.cl) where its work-groups' edges fall: 35 pixels (a tile and a part),
     inputs of 31, 33 and 70 bands (a local-memory chunk holds 32), outputs of one row block to 17 (130 bands: three
-    groups along the rows, each of 8 blocks)."""
+    groups along the rows, each of 8 blocks); and on a device whose groups hold 64 work items (2 row blocks each)."""
     rng = np.random.default_rng(rows + cols)
-    x, matrix = rng.standard_normal((cols, 5, 7)).astype(np.float32), rng.standard_normal((rows, cols))
-    be = opencl("float32", "reikna")
+    x, matrix = rng.standard_normal((cols, 5, 7)).astype(dtype), rng.standard_normal((rows, cols))
+    be = opencl(dtype, "reikna")
+    if group is not None:
+        monkeypatch.setattr(be.kernels, "max_group", group)
     got = be.to_host(be.bandmix(be.to_device(x), matrix))
-    assert relative_error(got, NumpyBackend("float32").bandmix(x, matrix)) <= 10 * ELEMENTWISE
+    assert relative_error(got, NumpyBackend(dtype).bandmix(x, matrix)) <= 10 * ELEMENTWISE
+
+
+def test_bandmix_constants_match_the_kernel():
+    """The launch's tile and rows (cl_kernel_code) are the kernel's #defines: a mismatch would index past the tile."""
+    import clsdcam.backends.cl_kernel_code as code
+    from clsdcam.backends.cl_program import kernel_dir
+
+    source = (kernel_dir() / "bandmix.cl").read_text()
+    for name in ("BANDMIX_ROWS", "BANDMIX_TILE"):
+        assert f"#define {name} {getattr(code, name)}\n" in source
 
 
 @pytest.mark.parametrize("case", HOST_PATH_CASES)

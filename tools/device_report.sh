@@ -37,7 +37,7 @@ while [ $# -gt 0 ]; do
         --no-install) INSTALL=0; shift ;;
         --tests) TESTS=1; shift ;;
         --demo) DEMO=1; shift ;;
-        --panel) PANEL=$2; shift 2 ;;
+        --panel) [[ ${2:-} =~ ^[0-9]+$ ]] || usage; PANEL=$2; shift 2 ;;
         *) usage ;;
     esac
 done
@@ -92,6 +92,7 @@ done
 step iteration "$PY" tools/bench_iteration.py --size "$SIZE" --bands "$BANDS" --ranks "$RANKS" --repeat "$REPEAT" \
     --backends "$BACKENDS" --no-authors --json "$OUT/iteration.json"
 SCRATCH=$(mktemp -d)
+trap 'rm -rf "$SCRATCH"' EXIT
 if [ $TESTS = 1 ]; then
     step tests "$PY" -m pytest -q -p no:cacheprovider -rs tests/test_parity.py tests/test_devcheck.py
 fi
@@ -104,6 +105,5 @@ if [ "$PANEL" -gt 0 ]; then
     step panel "$PY" tools/bench_converged.py --backend opencl --size "$SIZE" --bands "$BANDS" --scenes "$PANEL" \
         --out "$OUT/panel" --cache "$SCRATCH/cache"
 fi
-rm -rf "$SCRATCH"
 echo "$FAILED step(s) failed; everything is in $OUT" | tee -a "$SUMMARY"
 exit "$FAILED"
