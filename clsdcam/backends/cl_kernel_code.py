@@ -68,9 +68,7 @@ class KernelCode:
         target = be.target(out, (rows,) + x.shape[1:], x)
         pixels = x.size // x.shape[0]
         blocks = -(-rows // BANDMIX_ROWS)
-        kernel_limit = be.kernels.kernel("bandmix").get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE,
-                                                                        be.device)
-        per_group = max(1, min(blocks, min(BANDMIX_GROUP, be.kernels.max_group, kernel_limit) // BANDMIX_TILE))
+        per_group = max(1, min(blocks, min(BANDMIX_GROUP, be.kernels.group_limit("bandmix")) // BANDMIX_TILE))
         grid = (-(-pixels // BANDMIX_TILE) * BANDMIX_TILE, -(-blocks // per_group) * per_group)
         be.kernels.launch("bandmix", grid, (BANDMIX_TILE, per_group), target, x, self._matrix(matrix),
                           np.int32(rows), np.int32(cols), np.int64(pixels))

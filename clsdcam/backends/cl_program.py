@@ -87,6 +87,7 @@ class Kernels:
         self.acc = accumulator(self.device, kahan)
         self.program = program(queue.context, self.dtype, self.acc)
         self._kernels: dict[str, cl.Kernel] = {}
+        self._group_limits: dict[str, int] = {}   # kernel name -> its own CL_KERNEL_WORK_GROUP_SIZE
         self._partials: dict[tuple, tuple] = {}  # (groups, outputs) -> (host array, device buffer)
         self.cpu = is_cpu(self.device)
         self.max_group = min(LOCAL_CPU if self.cpu else LOCAL_1D, self.device.max_work_group_size)
@@ -96,6 +97,14 @@ class Kernels:
         if name not in self._kernels:
             self._kernels[name] = cl.Kernel(self.program, name)
         return self._kernels[name]
+
+    def group_limit(self, name: str) -> int:
+        """The most work items a group of kernel ``name`` may hold: ``max_group`` and the kernel's own limit on this
+        device (registers or local memory can make it lower), the latter asked once."""
+        if name not in self._group_limits:
+            self._group_limits[name] = self.kernel(name).get_work_group_info(
+                cl.kernel_work_group_info.WORK_GROUP_SIZE, self.device)
+        return min(self.max_group, self._group_limits[name])
 
     def launch(self, name: str, global_size, local_size, *args):
         return self.kernel(name)(self.queue, global_size, local_size, *_args(args))
