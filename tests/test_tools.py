@@ -25,6 +25,7 @@ import weight_oracles  # noqa: E402
 import weight_rejudge  # noqa: E402
 from clsdcam.metrics import psnr, spectral_angle  # noqa: E402
 from clsdcam.solve.auto_weights import AUTO_AT  # noqa: E402
+from clsdcam.solve.convergence import FIRST_READING, WINDOW  # noqa: E402
 from clsdcam.algorithms.admm import Admm  # noqa: E402
 from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE  # noqa: E402
 from clsdcam.solve.solver import Settings, Solver  # noqa: E402
@@ -208,11 +209,11 @@ def test_bench_panel_draws_fresh_scenes_of_every_kind_and_judges_both_rules(tmp_
 def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_path, capsys, monkeypatch):
     """Each scene: today, the default and both references; the answer is the better reference final per metric, the
     margins follow from the finals; a replay reads the references from the cache (no new file) and gives the same
-    reference; the stop replayed at a huge tolerance stops where the estimate first exists, and so does the default
-    run at that tolerance (--converge)."""
+    reference; the stop replayed at a huge tolerance stops where the estimate is first read (FIRST_READING after the
+    weight's restart), and so does the default run at that tolerance (--converge)."""
     monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
     monkeypatch.setattr(bench_panel, "panel_kinds", lambda: ["piecewise", "sparse"])
-    args = ["--size", "24x32", "--bands", "4", "--scenes", "2", "--seed", "3", "--reference-iters", "150",
+    args = ["--size", "24x32", "--bands", "4", "--scenes", "2", "--seed", "3", "--reference-iters", "200",
             "--replay", "1e9", "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "a")]
     bench_converged.main(args)
     first = json.loads((tmp_path / "a" / "converged.json").read_text())
@@ -226,11 +227,11 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
         assert margins["answer_db"] == pytest.approx(scene["default"]["psnr"] - scene["reference"]["psnr"] + 0.2)
         assert margins["time_ratio"] == pytest.approx(scene["default"]["seconds"] / scene["today"]["seconds"])
         stop = bench_converged.replay_stop(scene["references"]["admm"], 1e9)
-        assert stop["iteration"] == bench_converged.AUTO_AT + 4 * 25     # four windows after the weight's restart
+        assert stop["iteration"] == bench_converged.AUTO_AT + FIRST_READING
     text, progress = capsys.readouterr()
     assert "| 0 | piecewise | standard |" in text and "stop at 1e+09" in text
     assert "piecewise, standard: today's 300 iterations in" in progress
-    assert "sparse, standard: admm's reference, 150 iterations in" in progress
+    assert "sparse, standard: admm's reference, 200 iterations in" in progress
     bench_converged.main(args[:-1] + [str(tmp_path / "b"), "--converge", "1e9"])
     again = json.loads((tmp_path / "b" / "converged.json").read_text())
     assert sorted((tmp_path / "cache").iterdir()) == cached
@@ -241,9 +242,9 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
     assert all(s["default"]["tolerance"] in (CONVERGE, CONVERGE_WIDE) for s in first["scenes"])
     assert all((s["default"]["tolerance"] == CONVERGE_WIDE) == (s["default"]["mean_over_peak"] >= Admm.point_like_below)
                for s in first["scenes"])
-    assert f"the default's {bench_converged.AUTO_AT + 4 * 25} iterations (converged)" in progress
+    assert f"the default's {bench_converged.AUTO_AT + FIRST_READING} iterations (converged)" in progress
     assert "reference" not in progress                  # read from the cache: no solve to report
-    assert [s["default"]["iterations"] for s in again["scenes"]] == [bench_converged.AUTO_AT + 4 * 25] * 2
+    assert [s["default"]["iterations"] for s in again["scenes"]] == [bench_converged.AUTO_AT + FIRST_READING] * 2
     assert (tmp_path / "b" / "converged.png").stat().st_size > 0
 
 
@@ -266,7 +267,7 @@ def piecewise_panel(monkeypatch):
 
 def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_path, capsys, piecewise_panel):
     """``--variants``: each variant runs with its constants (α = 1 and 1.7 give other curves), the settled mark is
-    the first from which every mark is within, a huge tolerance stops where the estimate first exists, and the
+    the first from which every mark is within, a huge tolerance stops where the estimate is first read, and the
     modules' constants are as before afterwards."""
     from clsdcam.algorithms.admm import algorithm, balance
 
@@ -274,7 +275,7 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
     before = constants()
     bench_converged.main([*ONE_PIECEWISE_SCENE, "--variants",
                           "alpha=1,balance_at=1e9;alpha=1.7,tv=0.003,balance=3,balance_at=40",
-                          "--variant-iters", "160", "--replay", "1e9", "--cache", str(tmp_path / "cache"),
+                          "--variant-iters", "200", "--replay", "1e9", "--cache", str(tmp_path / "cache"),
                           "--out", str(tmp_path)])
     assert constants() == before
     scene = json.loads((tmp_path / "variants.json").read_text())["scenes"][0]
@@ -283,7 +284,7 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
     assert relaxed["variant"] == {"alpha": 1.7, "tv": 0.003, "balance": 3.0, "balance_at": 40.0}
     assert len(relaxed["balance"]) == 3 and all(b > 0 for b in relaxed["balance"])
     first_stops = [stop["iteration"] for stop in (plain["stops"][0], relaxed["stops"][0])]
-    assert first_stops == [bench_converged.AUTO_AT + 100] * 2
+    assert first_stops == [bench_converged.AUTO_AT + FIRST_READING] * 2
     points = [{"iteration": 10, "psnr": 0.0, "angle": 0.0}, {"iteration": 20, "psnr": 9.0, "angle": 0.0},
               {"iteration": 30, "psnr": 0.0, "angle": 0.0}, {"iteration": 40, "psnr": 9.0, "angle": 1.0}]
     assert bench_converged.settled_within(points, {"psnr": 9.1, "angle": 0.6}) == 40
@@ -415,22 +416,23 @@ def test_bench_converged_measures_starts_from_fista_and_from_the_answer(tmp_path
 
 def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys, piecewise_panel):
     """The traced run of as many iterations as the reference is the reference: its last cube is at distance 0; at a
-    huge tolerance the steps' estimate fires after four windows (three ratios) and the net one a window later (its
-    first window starts at iteration 25); a stop's distance is its mark's; "stays within" reads every later mark; the
+    huge tolerance the steps' estimate fires at FIRST_READING (three ratios, then three finite tails) and the net
+    one a window later (its first window starts at iteration 25); a stop's distance is its mark's; "stays within" reads every later mark; the
     reference's own error is its cube's relative distance from the truth."""
-    bench_stop.main([*ONE_PIECEWISE_SCENE, "--iters", "150", "--tolerances", "1e9", "--cache", str(tmp_path / "cache"),
+    bench_stop.main([*ONE_PIECEWISE_SCENE, "--reference-iters", "200", "--iters", "200", "--tolerances", "1e9", "--cache", str(tmp_path / "cache"),
                      "--out", str(tmp_path)])
     scene = json.loads((tmp_path / "stop.json").read_text())["scenes"][0]
     marks = scene["marks"]
-    assert [m["iteration"] for m in marks] == list(range(5, 151, 5)) and marks[-1]["distance"] == 0.0
+    assert [m["iteration"] for m in marks] == list(range(5, 201, 5)) and marks[-1]["distance"] == 0.0
     assert marks[0]["distance"] > 0.05
     sim = bench_panel.panel_scene({k: scene[k] for k in ("kind", "level", "seed")}, (24, 32), 4)
-    xstar = bench_converged.reference_cube(sim, scene, scene["tv"], "admm", 150, tmp_path / "cache").astype(np.float64)
+    xstar = bench_converged.reference_cube(sim, scene, scene["tv"], "admm", 200, tmp_path / "cache").astype(np.float64)
     assert scene["error"] == pytest.approx(np.linalg.norm(sim.truth - xstar) / np.linalg.norm(xstar), rel=1e-9)
     assert 0.01 < scene["error"] < 10
     (steps,), (net,) = scene["stops"]["steps"], scene["stops"]["net"]
-    assert (steps["iteration"], net["iteration"]) == (100, 125)
-    assert steps["distance"] == marks[19]["distance"] and net["distance"] == marks[24]["distance"]
+    assert (steps["iteration"], net["iteration"]) == (FIRST_READING, FIRST_READING + WINDOW)
+    assert steps["distance"] == marks[FIRST_READING // 5 - 1]["distance"]
+    assert net["distance"] == marks[(FIRST_READING + WINDOW) // 5 - 1]["distance"]
     ref = {"psnr": 9.0, "angle": 1.0}
     flags = [{"iteration": k, "psnr": p, "angle": 0.0, "within": p >= 8.8, "steps": s}
              for k, p, s in ((5, 9.0, 9.0), (10, 0.0, 0.1), (15, 9.0, 0.01))]

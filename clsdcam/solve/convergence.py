@@ -36,6 +36,7 @@ WINDOW = 25         # iterations a window sums
 RATIOS = 3          # window-to-window ratios the rate is judged by (the slowest)
 TRUSTED = 3         # the finite tails after a (re)start before one is reported
 FALLBACK_AFTER = 2  # unknown tails in a row before the long windows' tail is reported
+FIRST_READING = WINDOW * (RATIOS + TRUSTED)   # iterations after a (re)start before a steady decay is read
 
 
 class WindowTail:
