@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from clsdcam.solve.convergence import FALLBACK_AFTER, RATIOS, TRUSTED, WINDOW, DistanceEstimate, WindowTail
+from clsdcam.solve.convergence import (FALLBACK_AFTER, RATIOS, TRUSTED, WINDOW, DistanceEstimate, WindowTail,
+                                      paired_tail)
 from clsdcam.solve.driver import Rules
 from test_driver import Quadratic
 
@@ -68,48 +69,64 @@ def zig_zag(pairs, first, rate=0.8, jump=1.5):
     return steps
 
 
-def settled_then(steps):
-    """A run trusted first (halving steps), then ``steps``: (the W-window tail, the 2W-window tail, the reported
-    distance) after each of ``steps``."""
-    estimate, short, long_ = DistanceEstimate(window=1), WindowTail(1), WindowTail(2)
-    count = RATIOS + TRUSTED
-    trusted = [0.5 ** i for i in range(count + count % 2)]             # an even count: pairs stay aligned
-    for step in trusted:
-        estimate.add(step), short.add(step), long_.add(step)
-    assert math.isfinite(estimate.distance)
+def settled_zig_zag(pairs=12):
+    """A trusted start (steps shrinking by √0.8 a window: pairs of windows by 0.8) and a zig-zag that goes on at the
+    same rate a pair, W = 1."""
+    rho, count = 0.8 ** 0.5, RATIOS + TRUSTED
+    return [rho ** i for i in range(count)], zig_zag(pairs, first=rho ** count * (1 + rho))
+
+
+def readings(*parts):
+    """(the W-window tail, the reported distance) after each step of the last part, the parts fed in turn."""
+    estimate, short = DistanceEstimate(window=1), WindowTail(1)
+    for part in parts[:-1]:
+        for step in part:
+            estimate.add(step), short.add(step)
     read = []
-    for step in steps:
-        estimate.add(step), short.add(step), long_.add(step)
-        read.append((short.tail, long_.tail, estimate.distance))
+    for step in parts[-1]:
+        estimate.add(step), short.add(step)
+        read.append((short.tail, estimate.distance))
     return read
 
 
 def test_a_zig_zag_falls_back_on_windows_twice_as_long():
-    """Once trusted, the W-window tail goes ∞ at every window of a zig-zag; the first FALLBACK_AFTER − 1 of them
-    read ∞, the next ones the 2W-window tail, which ends at S·q/(1 − q) with q = rate."""
-    steps = zig_zag(12, first=0.1)
-    read = settled_then(steps)
-    assert all(short == math.inf for short, _, _ in read)
-    assert [distance for _, _, distance in read[:FALLBACK_AFTER - 1]] == [math.inf] * (FALLBACK_AFTER - 1)
-    assert all(distance == long_ for _, long_, distance in read[FALLBACK_AFTER - 1:])
-    assert read[-1][2] == pytest.approx(sum(steps[-2:]) * 0.8 / 0.2)
+    """Once trusted, the W-window tail goes ∞ at every window of a zig-zag: the first of them reads ∞, every later
+    one the tail of 2W windows that end with the window just closed, S·q/(1 − q) with q = rate."""
+    start, zig = settled_zig_zag()
+    assert math.isfinite(readings(start)[-1][1])
+    read = readings(start, zig)
+    unknown = next(n for n, (short, _) in enumerate(read) if short == math.inf)
+    assert all(short == math.inf for short, _ in read[unknown:])
+    assert [distance for _, distance in read[unknown:unknown + FALLBACK_AFTER - 1]] == [math.inf] * (FALLBACK_AFTER - 1)
+    assert all(math.isfinite(distance) for _, distance in read[unknown + FALLBACK_AFTER - 1:])
+    assert read[-1][1] == pytest.approx(sum(zig[-2:]) * 0.8 / 0.2)            # pairs as the zig-zag made them
+    assert read[-2][1] == pytest.approx(sum(zig[-3:-1]) * 0.8 / 0.2)          # pairs across them, just as fresh
+
+
+def test_a_jump_in_the_last_window_is_not_read_as_converged():
+    """During the fallback a window 100 times the one before makes the long windows grow too: ∞, where the tail of
+    the pairs closed before it would read a distance lower than any before."""
+    start, zig = settled_zig_zag()
+    read = readings(start, zig + [zig[-1] * 100])
+    assert math.isfinite(read[-2][1]) and read[-1][1] == math.inf
 
 
 def test_a_finite_tail_ends_the_fallback():
     """After the zig-zag, steps that shrink steadily are judged by the W-window tail again, at once (trusted)."""
-    zig = zig_zag(12, first=0.1)
+    start, zig = settled_zig_zag()
     calm = [zig[-1] * 0.5 ** i for i in range(1, RATIOS + 2)]
-    short, _, distance = settled_then(zig + calm)[-1]
+    short, distance = readings(start, zig + calm)[-1]
     assert distance == short == pytest.approx(calm[-1])                   # S·q/(1 − q), q = 1/2
 
 
 def test_one_unknown_tail_after_a_finite_one_is_unknown():
     """The fallback counts unknown tails in a row: after the calm steps, one window that grows reads ∞ again, not
     the 2W-window tail (finite there)."""
-    zig = zig_zag(12, first=0.1)
+    start, zig = settled_zig_zag()
     calm = [zig[-1] * 0.5 ** i for i in range(1, RATIOS + 2)]
-    short, long_, distance = settled_then(zig + calm + [calm[-1] * 4])[-1]
-    assert short == distance == math.inf and math.isfinite(long_)
+    steps = start + zig + calm + [calm[-1] * 1.2]
+    short, distance = readings(steps)[-1]
+    assert short == distance == math.inf and math.isfinite(paired_tail(steps))
 
 
 def test_no_fallback_before_the_tail_was_trusted():

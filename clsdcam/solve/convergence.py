@@ -23,8 +23,8 @@ zig-zag"):
   and stopped 0.32 dB short of its answer.
 - **Zig-zag.** Where ADMM's steps alternate, one window's sum against the next can sit above 1 for thousands of
   iterations although the run has settled. Once the tail was trusted, FALLBACK_AFTER unknown tails in a row
-  report the tail of windows twice as long (the same steps, summed in pairs of windows) instead, until a finite
-  tail returns.
+  report the tail of windows twice as long instead, until a finite tail returns: the last 2(RATIOS + 1) window sums
+  added in pairs, so the long windows, too, end with the window just closed.
 
 The solve stops at the end of the first window whose reported distance is below the tolerance.
 """
@@ -34,13 +34,34 @@ import math
 
 WINDOW = 25         # iterations a window sums
 RATIOS = 3          # window-to-window ratios the rate is judged by (the slowest)
-TRUSTED = 3         # the finite tails after a (re)start before one is reported
+TRUSTED = 3         # the finite tails after a (re)start up to and including the first one reported
 FALLBACK_AFTER = 2  # unknown tails in a row before the long windows' tail is reported
 FIRST_READING = WINDOW * (RATIOS + TRUSTED)   # iterations after a (re)start before a steady decay is read
 
 
+def geometric_tail(sums: list[float]) -> float:
+    """d = S_j·q/(1 − q) of the last RATIOS + 1 window sums, q their slowest ratio; ∞ while there are fewer, or
+    while q ≥ 1."""
+    last = sums[-RATIOS - 1:]
+    if len(last) <= RATIOS or not all(math.isfinite(s) for s in last):
+        return math.inf
+    if last[-1] == 0.0:
+        return 0.0
+    q = max(after / before if before > 0 else math.inf for before, after in zip(last, last[1:]))
+    return last[-1] * q / (1.0 - q) if q < 1.0 else math.inf
+
+
+def paired_tail(sums: list[float]) -> float:
+    """The geometric tail of windows twice as long, all ending with the last window: the last 2(RATIOS + 1) sums
+    added in pairs (∞ while there are fewer)."""
+    last = sums[-2 * (RATIOS + 1):]
+    if len(last) < 2 * (RATIOS + 1):
+        return math.inf
+    return geometric_tail([first + second for first, second in zip(last[::2], last[1::2])])
+
+
 class WindowTail:
-    """The tail d_j of one window length (the module docstring's formula)."""
+    """The window sums S_j and their tail d_j (the module docstring's formula)."""
 
     def __init__(self, window: int):
         self.window = window
@@ -57,22 +78,13 @@ class WindowTail:
             return False
         self.sums.append(self.open)
         self.open, self.count = 0.0, 0
-        self.tail = self._tail()
+        self.tail = geometric_tail(self.sums)
         return True
-
-    def _tail(self) -> float:
-        last = self.sums[-RATIOS - 1:]
-        if len(last) <= RATIOS or not all(math.isfinite(s) for s in last):
-            return math.inf
-        if last[-1] == 0.0:
-            return 0.0
-        q = max(after / before if before > 0 else math.inf for before, after in zip(last, last[1:]))
-        return last[-1] * q / (1.0 - q) if q < 1.0 else math.inf
 
 
 class DistanceEstimate:
     """The running estimate of the relative distance to the limit, ``distance``: the W-window tail once TRUSTED
-    finite ones were read, the 2W-window tail after FALLBACK_AFTER unknown ones in a row after that (module
+    finite ones were read, the paired 2W-window tail after FALLBACK_AFTER unknown ones in a row after that (module
     docstring)."""
 
     def __init__(self, window: int = WINDOW):
@@ -81,7 +93,6 @@ class DistanceEstimate:
 
     def add(self, change: float) -> bool:
         """Count one iteration's relative step; True when it closed a window (``distance`` is new)."""
-        self.long.add(change)
         if not self.short.add(change):
             return False
         if math.isfinite(self.short.tail):
@@ -90,11 +101,11 @@ class DistanceEstimate:
         else:
             self.unknown += 1
             settled = self.finite >= TRUSTED and self.unknown >= FALLBACK_AFTER
-            self.distance = self.long.tail if settled else math.inf
+            self.distance = paired_tail(self.short.sums) if settled else math.inf
         return True
 
     def restart(self) -> None:
         """Forget the windows (the objective changed: the steps before belong to another limit)."""
-        self.short, self.long = WindowTail(self.window), WindowTail(2 * self.window)
+        self.short = WindowTail(self.window)
         self.finite = self.unknown = 0                 # finite tails read; unknown ones in a row
         self.distance = math.inf
