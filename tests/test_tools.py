@@ -417,10 +417,10 @@ def test_bench_converged_measures_starts_from_fista_and_from_the_answer(tmp_path
 def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys, piecewise_panel):
     """The traced run of as many iterations as the reference is the reference: its last cube is at distance 0; at a
     huge tolerance the steps' estimate fires at FIRST_READING (three ratios, then three finite tails) and the net
-    one a window later (its first window starts at iteration 25); a stop's distance is its mark's; "stays within" reads every later mark; the
-    reference's own error is its cube's relative distance from the truth."""
-    bench_stop.main([*ONE_PIECEWISE_SCENE, "--reference-iters", "200", "--iters", "200", "--tolerances", "1e9", "--cache", str(tmp_path / "cache"),
-                     "--out", str(tmp_path)])
+    one a window later (its first window starts at iteration 25); a stop's distance is its mark's; "stays within"
+    reads every later mark; the reference's own error is its cube's relative distance from the truth."""
+    bench_stop.main([*ONE_PIECEWISE_SCENE, "--reference-iters", "200", "--iters", "200", "--tolerances", "1e9",
+                     "--cache", str(tmp_path / "cache"), "--out", str(tmp_path)])
     scene = json.loads((tmp_path / "stop.json").read_text())["scenes"][0]
     marks = scene["marks"]
     assert [m["iteration"] for m in marks] == list(range(5, 201, 5)) and marks[-1]["distance"] == 0.0

@@ -13,6 +13,9 @@ are replayed on the run:
 * **steps** (the stop's): each window's summed relative steps Σ‖x_{i+1} − x_i‖/‖x_{i+1}‖;
 * **net**: each window's net move ‖x_end − x_start‖/‖x_end‖ (what a stop would get for one cube more).
 
+Both carry the estimate's two guards (its first readings withheld, and its fallback on windows twice as long: for
+**net**, two consecutive net moves added, not the net move over 2W).
+
 The table gives, per scene, the mark from which the run stays within the rules and its true distance there, the
 reference's own error ‖x* − truth‖/‖x*‖ and that distance over the error (what the rules need, in units of the
 reconstruction's error); and per estimate and ``--tolerances`` value, the iteration where that estimate first
