@@ -6,7 +6,7 @@ import pytest
 
 from clsdcam.algorithms.admm import Admm
 from clsdcam.algorithms.admm.algorithm import NONNEG, NONNEG_POINT_LIKE, TV
-from clsdcam.solve.auto_weights import AUTO_AT, AutoWeights
+from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.sim import simulate
@@ -40,7 +40,7 @@ class Residual:
 
     backend = BACKEND
     rules = Rules(converge=CONVERGE)
-    widen_stop = Driver.widen_stop
+    widen_stop, narrow_stop = Driver.widen_stop, Driver.narrow_stop
 
     def __init__(self, sigma: float = 0.01, cube=None):
         self.residual_buffer = np.random.default_rng(0).normal(0, sigma, (256, 256))
@@ -147,16 +147,30 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene():
     assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))
 
 
-@pytest.mark.parametrize("cube, widened", [
-    (one_lit_pixel(), False),                       # point-like: the stop stays at CONVERGE
-    (np.full((4, 32, 32), 0.5), True),
-    (np.zeros((4, 32, 32)), True),                  # a dark iterate counts as p = 1
+def lit_voxels(n: int, shape=(4, 128, 128)) -> np.ndarray:
+    cube = np.zeros(shape)
+    cube.reshape(-1)[::97][:n] = 1.0
+    return cube
+
+
+@pytest.mark.parametrize("cube, tolerance, said", [
+    (lit_voxels(120), CONVERGE, None),                   # point-like (p = 120/65536), not a few points: CONVERGE
+    (lit_voxels(40), CONVERGE * (40 / FEW_POINTS) ** 2, "a scene of a few points: 40 lit voxels"),
+    (one_lit_pixel(), CONVERGE * (1 / FEW_POINTS) ** 2, "a scene of a few points: 1 lit voxels"),
+    (np.full((4, 32, 32), 0.5), CONVERGE_WIDE, "not a point-like scene"),
+    (np.zeros((4, 32, 32)), CONVERGE_WIDE, "not a point-like scene"),   # a dark iterate counts as p = 1
 ])
-def test_the_stop_widens_where_the_probe_reads_a_scene_that_is_not_point_like(cube, widened):
+def test_the_stop_widens_on_a_spread_scene_and_narrows_as_the_square_of_a_few_points(cube, tolerance, said):
+    """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
+    point-like threshold, CONVERGE below it, CONVERGE·(n/FEW_POINTS)² below FEW_POINTS; a note says so where it
+    moved."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)
-    assert stand_in.rules.converge == (CONVERGE_WIDE if widened else CONVERGE)
-    assert any(line.startswith(f"stop: --converge auto, {CONVERGE_WIDE:g}") for line in stand_in.notes) == widened
+    assert stand_in.rules.converge == pytest.approx(tolerance, rel=1e-12)
+    assert weights.chosen["lit_voxels"] == pytest.approx(cube.sum() / cube.max() if cube.any() else cube.size)
+    stops = [line for line in stand_in.notes if line.startswith("stop: --converge auto, ")]
+    assert [said in line for line in stops] == ([] if said is None else [True])
+    assert said is None or stops[0].startswith(f"stop: --converge auto, {tolerance:.2g} (")
 
 
 @pytest.mark.parametrize("point_like_below, wide_stop", [(0.0, CONVERGE_WIDE), (0.0025, None)])
@@ -184,10 +198,11 @@ def test_a_converge_that_is_neither_auto_nor_positive_is_refused(converge):
         Settings(converge=converge)
 
 
-def test_a_solve_widens_its_stop_on_a_spread_scene_and_keeps_it_on_a_point_scene():
+def test_a_solve_widens_its_stop_on_a_spread_scene_and_narrows_it_on_a_few_points():
     """Through the solver, --iters auto: a piecewise scene stops at CONVERGE_WIDE and says so in its attributes, and
-    keeps ADMM's non-negativity penalty; three lit voxels (point-like) stop at CONVERGE; a tolerance the user gives is
-    kept; a warm start from the first solve's state, whose weights it carries, reads no probe and keeps CONVERGE."""
+    keeps ADMM's non-negativity penalty; three lit voxels (point-like, a few points) stop at CONVERGE·(n/FEW_POINTS)²
+    with their count n in the attributes; a tolerance the user gives is kept; a warm start from the first solve's
+    state, whose weights it carries, reads no probe and keeps CONVERGE."""
     points = np.zeros((8, 48, 64), np.float32)
     for band, y, x in ((1, 20, 20), (4, 30, 40), (6, 15, 45)):
         points[band, y, x] = 1.0
@@ -198,8 +213,10 @@ def test_a_solve_widens_its_stop_on_a_spread_scene_and_keeps_it_on_a_point_scene
     assert wide.state.carry[0].penalties.nonneg / wide.state.carry[0].penalties.tv == pytest.approx(NONNEG / TV)
     assert wide.stop_reason == "converged" and wide.attrs["distance_estimate"] < CONVERGE_WIDE
     narrow = reconstruct(point.measurement, point.calibration)
-    assert narrow.attrs["mean_over_peak"] < Admm.point_like_below and narrow.attrs["stop_tolerance"] == CONVERGE
-    assert narrow.stop_reason == "converged" and narrow.attrs["distance_estimate"] < CONVERGE
+    few = narrow.attrs["lit_voxels"]
+    assert narrow.attrs["mean_over_peak"] < Admm.point_like_below and 3 <= few < FEW_POINTS
+    assert narrow.attrs["stop_tolerance"] == pytest.approx(CONVERGE * (few / FEW_POINTS) ** 2, rel=1e-12)
+    assert narrow.stop_reason == "converged" and narrow.attrs["distance_estimate"] < narrow.attrs["stop_tolerance"]
     kept = reconstruct(spread.measurement, spread.calibration, converge=0.07)
     assert kept.attrs["stop_tolerance"] == 0.07 and kept.iterations > wide.iterations
     warm = Solver(spread.calibration).solve(spread.measurement, state=wide.state)       # weights carried: no probe

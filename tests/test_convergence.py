@@ -165,6 +165,19 @@ def test_the_drivers_stop_widens_and_never_narrows_or_turns_on(converge, wider, 
     assert driver.rules.converge == after
 
 
+@pytest.mark.parametrize("converge, narrower, after", [
+    (1e-2, 1e-3, 1e-3),          # narrowed
+    (1e-3, 1e-2, 1e-3),          # never widened
+    (0.0, 1e-3, 0.0),            # a rule that is off stays off
+])
+def test_the_drivers_stop_narrows_and_never_widens_or_turns_on(converge, narrower, after):
+    problem = Quadratic(3, m=40, n=40, mu=1e-2)
+    driver, functions = problem.driver()
+    driver.rules = Rules(converge=converge)
+    driver.narrow_stop(narrower)
+    assert driver.rules.converge == after
+
+
 def test_a_widened_stop_stops_the_same_run_sooner():
     """From the iteration it is widened, the driver stops at the wider tolerance: the run that widens at
     iteration 20 stops where the run at the wide tolerance does, earlier than the one at the narrow tolerance."""

@@ -47,7 +47,7 @@ def test_a_short_solve_is_told_to_run_longer_not_to_doubt_the_calibration(scenes
     assert CALIBRATION_DOUBT not in warning
 
 
-@pytest.mark.parametrize("given, says", [((), "--converge auto: {:g}"), (("--converge", "0.07"), "--converge {:g}")])
+@pytest.mark.parametrize("given, says", [((), "--converge auto: {:.2g}"), (("--converge", "0.07"), "--converge {:g}")])
 def test_the_stop_line_says_the_tolerance_the_solve_stopped_at(scenes, tmp_path, capsys, given, says):
     """``--converge auto`` says what auto came to (the cube's ``stop_tolerance``), a tolerance given is said as it is."""
     assert reconstruct(scenes, "small", "small", tmp_path / "c.h5", "--quiet", *given) == 0

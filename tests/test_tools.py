@@ -255,6 +255,31 @@ def test_bench_converged_refuses_a_tolerance_that_is_not_positive_before_writing
     assert exit_.value.code == 2 and not (tmp_path / "out").exists()
 
 
+def test_panels_draw_the_simulators_point_scenes_with_kinds(tmp_path, capsys):
+    """--kinds points,sources: a panel's scenes are the simulator's scenes of those names, in turn, at each scene's
+    seed and noise level (the simulation is simulate's own); a kind that is none of the panel's or those is one line
+    on stderr, exit 2, before a folder is made."""
+    import argparse
+
+    from clsdcam.sim import simulate
+
+    args = argparse.Namespace(scenes=4, only=None, kinds=bench_panel.kind_list("points, sources"))
+    chosen = bench_panel.chosen_scenes(None, args, 5)
+    assert [plan["kind"] for _, plan in chosen] == ["points", "sources"] * 2
+    assert [plan["level"] for _, plan in chosen] == ["standard", "standard", "low light", "low light"]
+    for _, plan in chosen:
+        sim = bench_panel.panel_scene(plan, (24, 32), 4)
+        own = simulate(plan["kind"], (24, 32), 4, plan["seed"] % 2 ** 31, **bench_panel.LEVELS[plan["level"]])
+        assert sim.scene == plan["kind"] and np.array_equal(sim.truth, own.truth)
+        assert np.array_equal(sim.measurement, own.measurement)
+    for tool in (bench_converged, bench_stop):
+        with pytest.raises(SystemExit) as stop:
+            tool.main(["--kinds", "points,dots", "--seed", "1", "--out", str(tmp_path / "out")])
+        errors = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]
+        assert stop.value.code == 2 and len(errors) == 1 and "--kinds" in errors[0] and "sources" in errors[0]
+    assert not (tmp_path / "out").exists()
+
+
 ONE_PIECEWISE_SCENE = ["--size", "24x32", "--bands", "4", "--scenes", "1", "--seed", "3", "--reference-iters", "150"]
 
 

@@ -26,7 +26,9 @@ snapshots) over the default's, the speed-up. Writes ``converged.json`` (after ev
 points, the reference's band). ``--seed`` replays a panel, ``--only I,J`` some scenes of it; ``--weight-from
 today`` takes the weight from today's run instead, ``--replay`` replays the stop at other tolerances on the
 cached reference runs, and ``--converge T`` runs the default with another stopping tolerance (the package's
-``--converge`` T: what a new default tolerance would give, judged by the same rules).
+``--converge`` T: what a new default tolerance would give, judged by the same rules). ``--kinds points`` (or any
+list of kinds) draws those kinds in turn: the simulator's scenes of a few points (``points``, ``sources``) are
+among them, which the panel's five kinds are not.
 
 ``--variants 'alpha=1.7,tv=0.003;alpha=1'`` measures ADMM's constants instead (``clsdcam.algorithms.admm``'s DATA,
 TV, NONNEG, RELAXATION and BALANCE_AT, and THRESHOLD_OVER_RMS of its balance, by the names data, tv, nonneg, alpha,
@@ -51,7 +53,8 @@ import numpy as np
 
 from admm_acceleration import ACCELERATIONS, accelerated
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text, timed_run
-from bench_panel import chosen_scenes, panel_scene, scene_indices, progress, scene_done, scene_name
+from bench_panel import (POINT_SCENES, chosen_scenes, kind_list, panel_scene, scene_indices, progress, scene_done,
+                         scene_name)
 from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
@@ -81,7 +84,7 @@ def final_point(sim, result, seconds: float) -> dict:
     return {"psnr": psnr(result.cube, sim.truth), "angle": spectral_angle(result.cube, sim.truth),
             "seconds": seconds, "iterations": result.iterations, "stop_reason": result.stop_reason,
             "estimate": result.attrs.get("distance_estimate"), "tolerance": result.attrs.get("stop_tolerance"),
-            "mean_over_peak": result.attrs.get("mean_over_peak")}
+            "mean_over_peak": result.attrs.get("mean_over_peak"), "lit_voxels": result.attrs.get("lit_voxels")}
 
 
 def curve(sim, result) -> list[dict]:
@@ -320,7 +323,7 @@ def scene_rows(results: dict) -> list[str]:
 def stop_words(point: dict) -> str:
     """Why a run stopped, with the tolerance where it stopped "converged" ("converged at 0.1")."""
     tolerance = point.get("tolerance")
-    return point["stop_reason"] + (f" at {tolerance:g}" if tolerance and point["stop_reason"] == "converged" else "")
+    return point["stop_reason"] + (f" at {tolerance:.2g}" if tolerance and point["stop_reason"] == "converged" else "")
 
 
 def pair(point: dict) -> str:
@@ -390,9 +393,12 @@ WEIGHT_FROM = {"default": "the default's", "today": "today's"}   # --weight-from
 
 
 def add_panel_options(parser, scenes: int, reference_iters: int, weight_from: str, seed_required: bool = False):
-    """The options of a tool on this module's panel and its reference cache (bench_stop's too): --scenes, --seed,
-    --only, --reference-iters, --cache and --weight-from, with the tool's defaults."""
+    """The options of a tool on this module's panel and its reference cache (bench_stop's too): --scenes, --kinds,
+    --seed, --only, --reference-iters, --cache and --weight-from, with the tool's defaults."""
     parser.add_argument("--scenes", type=int, default=scenes, help=f"random scenes (kinds in turn; default {scenes})")
+    parser.add_argument("--kinds", type=kind_list, metavar="K[,L...]",
+                        help="the kinds drawn in turn (default: every kind of clsdcam.sim.kinds; also "
+                             f"{', '.join(POINT_SCENES)}, the simulator's scenes of a few points)")
     parser.add_argument("--seed", type=int, default=None, required=seed_required,
                         help="the panel" + ("" if seed_required else " to replay (default: fresh entropy)"))
     parser.add_argument("--only", type=scene_indices, metavar="I[,J...]", help="these scenes of the panel alone")
@@ -434,7 +440,8 @@ def main(argv=None) -> int:
     out, cache = Path(args.out), Path(args.cache)
     out.mkdir(parents=True, exist_ok=True)
     cache.mkdir(parents=True, exist_ok=True)
-    results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "backend": args.backend,
+    results = {"seed": seed, "kinds": args.kinds, "size": size_text(args.size), "bands": args.bands,
+               "backend": args.backend,
                "reference_iters": args.reference_iters, "weight_from": args.weight_from, "converge": args.converge,
                "replay": [float(t) for t in args.replay.split(",") if t], "scenes": []}
     args.tolerances = results["replay"]

@@ -6,7 +6,8 @@ fixed TV weights, on random scenes of every kind (:mod:`clsdcam.sim.kinds`) at t
 
 Every run draws fresh seeds (``--seed`` replays one: it is printed and recorded), so the panel cannot be tuned
 on: each scene is a new layout, new spectra, a new PSF and filter array (the simulator's, from the scene's seed)
-and new noise. Scene i is of kind ``KINDS[i mod 5]`` at noise level ``LEVELS[(i div 5) mod 2]``.
+and new noise. Scene i is of kind ``KINDS[i mod 5]`` at noise level ``LEVELS[(i div 5) mod 2]`` (with ``--kinds``,
+of those kinds in turn; the simulator's scenes of a few points, ``POINT_SCENES``, may be among them).
 
 The rules, at every mark (accuracy.md's, permanent): the default's PSNR ≥ ``--no-skip``'s − 0.2 dB and its mean
 spectral angle ≤ ``--no-skip``'s + 0.5°. The weight's rule, at the last mark: the default's PSNR ≥ the best fixed
@@ -40,6 +41,7 @@ from clsdcam.solve.settings import AUTO
 
 LEVELS = {"standard": {"noise_var": 1e-5, "photons": 2e4}, "low light": {"noise_var": 1e-4, "photons": 2e3}}
 SWEEP_PSNR_DB, SWEEP_ANGLE_DEG = 0.5, 1.0
+POINT_SCENES = ("points", "sources")   # the simulator's scenes of a few points (clsdcam.sim.scenes), for --kinds
 ALSO = {"support-field": {"support_field": True}, "subspace": {"subspace": True},   # what --also judges
         "algorithm admm": {"algorithm": "admm"}}
 
@@ -97,14 +99,28 @@ def chosen_scenes(parser, args, seed: int) -> list[tuple[int, dict]]:
     only = set(args.only or ())
     if not all(i < args.scenes for i in only):
         parser.error(f"--only {','.join(map(str, args.only))}: the panel has scenes 0 … {args.scenes - 1}")
-    return [(i, plan) for i, plan in enumerate(scene_plan(args.scenes, seed, panel_kinds())) if not only or i in only]
+    kinds = getattr(args, "kinds", None) or panel_kinds()
+    return [(i, plan) for i, plan in enumerate(scene_plan(args.scenes, seed, kinds)) if not only or i in only]
+
+
+def kind_list(text: str) -> list[str]:
+    """--kinds' value, "K,L,…", as kinds a panel draws in turn: of :data:`KINDS` and :data:`POINT_SCENES` (an
+    argparse type: anything else is the parser's one-line error)."""
+    kinds = [kind.strip() for kind in text.split(",") if kind.strip()]
+    unknown = [kind for kind in kinds if kind not in KINDS and kind not in POINT_SCENES]
+    if not kinds or unknown:
+        raise argparse.ArgumentTypeError(f"{text!r}: kinds are {', '.join((*KINDS, *POINT_SCENES))}")
+    return kinds
 
 
 def panel_scene(plan: dict, shape, bands: int):
-    """The simulation of one planned scene: its kind's cube, the simulator's camera and noise, all from its seed."""
+    """The simulation of one planned scene: its kind's cube (or the simulator's scene of that name), the
+    simulator's camera and noise, all from its seed."""
+    seed, noise = plan["seed"] % 2 ** 31, LEVELS[plan["level"]]
+    if plan["kind"] in POINT_SCENES:
+        return simulate(scene=plan["kind"], shape=shape, n_bands=bands, seed=seed, **noise)
     cube = make_kind(plan["kind"], shape, band_wavelengths(bands), plan["seed"])
-    return simulate(scene=f"kind:{plan['kind']}", shape=shape, n_bands=bands, seed=plan["seed"] % 2 ** 31, cube=cube,
-                    **LEVELS[plan["level"]])
+    return simulate(scene=f"kind:{plan['kind']}", shape=shape, n_bands=bands, seed=seed, cube=cube, **noise)
 
 
 def run_scene(plan: dict, shape, bands: int, marks, points: int, also=()) -> dict:

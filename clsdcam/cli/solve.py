@@ -152,8 +152,8 @@ def stop_text(result) -> str:
         return result.stop_reason
     close = (f"about {100 * distance:.2g}% from the converged cube" if distance < float("inf")
              else "its distance to the converged cube not yet known")
-    tolerance = f"{result.attrs['stop_tolerance']:g}"
-    converge = f"auto: {tolerance}" if result.attrs["converge"] == "auto" else tolerance
+    tolerance = result.attrs["stop_tolerance"]
+    converge = f"auto: {tolerance:.2g}" if result.attrs["converge"] == "auto" else f"{tolerance:g}"
     return f"{result.stop_reason}, {close} by its own estimate (--converge {converge})"
 
 

@@ -129,6 +129,12 @@ class Driver:
         if 0 < self.rules.converge < converge:
             self.rules = replace(self.rules, converge=converge)
 
+    def narrow_stop(self, converge: float):
+        """Stop from now on only when the estimated distance is below ``converge`` (the rules' own where that is
+        narrower, or where the rule is off)."""
+        if 0 < converge < self.rules.converge:
+            self.rules = replace(self.rules, converge=converge)
+
     def rescore(self, objective):
         """Go on from the same iterates, momentum and step under another objective (e.g. auto weights chosen)."""
         self.checkpoints.rescore(objective)
