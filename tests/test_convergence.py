@@ -152,29 +152,19 @@ def test_without_the_rule_no_record_carries_a_distance():
     assert result.stop_reason == "iterations" and not any("distance" in r for r in result.history)
 
 
-@pytest.mark.parametrize("converge, wider, after", [
-    (1e-3, 1e-2, 1e-2),          # widened
-    (1e-2, 1e-3, 1e-2),          # never narrowed
-    (0.0, 1e-2, 0.0),            # a rule that is off stays off
+@pytest.mark.parametrize("move, converge, given, after", [
+    ("widen_stop", 1e-3, 1e-2, 1e-2),          # widened
+    ("widen_stop", 1e-2, 1e-3, 1e-2),          # never narrowed
+    ("widen_stop", 0.0, 1e-2, 0.0),            # a rule that is off stays off
+    ("narrow_stop", 1e-2, 1e-3, 1e-3),         # narrowed
+    ("narrow_stop", 1e-3, 1e-2, 1e-3),         # never widened
+    ("narrow_stop", 0.0, 1e-3, 0.0),           # a rule that is off stays off
 ])
-def test_the_drivers_stop_widens_and_never_narrows_or_turns_on(converge, wider, after):
+def test_the_drivers_stop_moves_only_its_own_way_and_never_turns_on(move, converge, given, after):
     problem = Quadratic(3, m=40, n=40, mu=1e-2)
     driver, functions = problem.driver()
     driver.rules = Rules(converge=converge)
-    driver.widen_stop(wider)
-    assert driver.rules.converge == after
-
-
-@pytest.mark.parametrize("converge, narrower, after", [
-    (1e-2, 1e-3, 1e-3),          # narrowed
-    (1e-3, 1e-2, 1e-3),          # never widened
-    (0.0, 1e-3, 0.0),            # a rule that is off stays off
-])
-def test_the_drivers_stop_narrows_and_never_widens_or_turns_on(converge, narrower, after):
-    problem = Quadratic(3, m=40, n=40, mu=1e-2)
-    driver, functions = problem.driver()
-    driver.rules = Rules(converge=converge)
-    driver.narrow_stop(narrower)
+    getattr(driver, move)(given)
     assert driver.rules.converge == after
 
 

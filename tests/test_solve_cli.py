@@ -9,7 +9,7 @@ import pytest
 
 from clsdcam.backends import cl_devices, get_backend, resolve_backend
 from clsdcam.cli import main
-from clsdcam.cli.solve import LEVELLED, TAIL, ProgressBar, data_fall, poor_fit_warning
+from clsdcam.cli.solve import LEVELLED, TAIL, ProgressBar, data_fall, poor_fit_warning, stop_text
 from clsdcam.errors import InputError
 from clsdcam.solve.settings import CONVERGE, CONVERGE_WIDE
 
@@ -56,6 +56,16 @@ def test_the_stop_line_says_the_tolerance_the_solve_stopped_at(scenes, tmp_path,
     assert converge == (float(given[1]) if given else "auto")
     assert tolerance == 0.07 if given else tolerance in (CONVERGE, CONVERGE_WIDE)
     assert f"by its own estimate ({says.format(tolerance)})" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("converge, tolerance, says", [("auto", 0.0087123, "--converge auto: 0.0087"),
+                                                       ("auto", 0.1, "--converge auto: 0.1"),
+                                                       (0.0087123, 0.0087123, "--converge 0.0087123")])
+def test_the_stop_line_rounds_an_automatic_tolerance_and_keeps_a_given_one(converge, tolerance, says):
+    """A tolerance auto came to (a few points' narrowed one) is said to two digits, one the user gave as given."""
+    result = SimpleNamespace(stop_reason="converged", attrs={"distance_estimate": 0.0081, "stop_tolerance": tolerance,
+                                                             "converge": converge})
+    assert stop_text(result) == f"converged, about 0.81% from the converged cube by its own estimate ({says})"
 
 
 def interrupt_at(monkeypatch, iteration: int):

@@ -272,7 +272,7 @@ def test_panels_draw_the_simulators_point_scenes_with_kinds(tmp_path, capsys):
         own = simulate(plan["kind"], (24, 32), 4, plan["seed"] % 2 ** 31, **bench_panel.LEVELS[plan["level"]])
         assert sim.scene == plan["kind"] and np.array_equal(sim.truth, own.truth)
         assert np.array_equal(sim.measurement, own.measurement)
-    for tool in (bench_converged, bench_stop):
+    for tool in (bench_panel, bench_converged, bench_stop):
         with pytest.raises(SystemExit) as stop:
             tool.main(["--kinds", "points,dots", "--seed", "1", "--out", str(tmp_path / "out")])
         errors = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]

@@ -53,7 +53,7 @@ import numpy as np
 
 from admm_acceleration import ACCELERATIONS, accelerated
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text, timed_run
-from bench_panel import (POINT_SCENES, chosen_scenes, kind_list, panel_scene, scene_indices, progress, scene_done,
+from bench_panel import (add_kinds_option, chosen_scenes, panel_scene, scene_indices, progress, scene_done,
                          scene_name)
 from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
@@ -396,9 +396,7 @@ def add_panel_options(parser, scenes: int, reference_iters: int, weight_from: st
     """The options of a tool on this module's panel and its reference cache (bench_stop's too): --scenes, --kinds,
     --seed, --only, --reference-iters, --cache and --weight-from, with the tool's defaults."""
     parser.add_argument("--scenes", type=int, default=scenes, help=f"random scenes (kinds in turn; default {scenes})")
-    parser.add_argument("--kinds", type=kind_list, metavar="K[,L...]",
-                        help="the kinds drawn in turn (default: every kind of clsdcam.sim.kinds; also "
-                             f"{', '.join(POINT_SCENES)}, the simulator's scenes of a few points)")
+    add_kinds_option(parser)
     parser.add_argument("--seed", type=int, default=None, required=seed_required,
                         help="the panel" + ("" if seed_required else " to replay (default: fresh entropy)"))
     parser.add_argument("--only", type=scene_indices, metavar="I[,J...]", help="these scenes of the panel alone")
@@ -441,9 +439,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     cache.mkdir(parents=True, exist_ok=True)
     results = {"seed": seed, "kinds": args.kinds, "size": size_text(args.size), "bands": args.bands,
-               "backend": args.backend,
-               "reference_iters": args.reference_iters, "weight_from": args.weight_from, "converge": args.converge,
-               "replay": [float(t) for t in args.replay.split(",") if t], "scenes": []}
+               "backend": args.backend, "reference_iters": args.reference_iters, "weight_from": args.weight_from,
+               "converge": args.converge, "replay": [float(t) for t in args.replay.split(",") if t], "scenes": []}
     args.tolerances = results["replay"]
     name = "variants" if args.variants else "converged"
     print(f"panel seed {seed}", file=sys.stderr, flush=True)

@@ -5,9 +5,10 @@ fixed TV weights, on random scenes of every kind (:mod:`clsdcam.sim.kinds`) at t
     python tools/bench_panel.py --size 128x160 --bands 64 --scenes 20 --marks 50,100,300 --out panel
 
 Every run draws fresh seeds (``--seed`` replays one: it is printed and recorded), so the panel cannot be tuned
-on: each scene is a new layout, new spectra, a new PSF and filter array (the simulator's, from the scene's seed)
-and new noise. Scene i is of kind ``KINDS[i mod 5]`` at noise level ``LEVELS[(i div 5) mod 2]`` (with ``--kinds``,
-of those kinds in turn; the simulator's scenes of a few points, ``POINT_SCENES``, may be among them).
+on: each scene is a new layout (but the fixed one of ``--kinds sources``), new spectra, a new PSF and filter array
+(the simulator's, from the scene's seed) and new noise. Scene i is of kind ``KINDS[i mod 5]`` at noise level
+``LEVELS[(i div 5) mod 2]`` (with ``--kinds``, of those kinds in turn; the simulator's scenes of a few points,
+``POINT_SCENES``, may be among them).
 
 The rules, at every mark (accuracy.md's, permanent): the default's PSNR ≥ ``--no-skip``'s − 0.2 dB and its mean
 spectral angle ≤ ``--no-skip``'s + 0.5°. The weight's rule, at the last mark: the default's PSNR ≥ the best fixed
@@ -101,6 +102,13 @@ def chosen_scenes(parser, args, seed: int) -> list[tuple[int, dict]]:
         parser.error(f"--only {','.join(map(str, args.only))}: the panel has scenes 0 … {args.scenes - 1}")
     kinds = getattr(args, "kinds", None) or panel_kinds()
     return [(i, plan) for i, plan in enumerate(scene_plan(args.scenes, seed, kinds)) if not only or i in only]
+
+
+def add_kinds_option(parser) -> None:
+    """--kinds: the kinds a panel draws in turn (:func:`kind_list`; default :func:`panel_kinds`)."""
+    parser.add_argument("--kinds", type=kind_list, metavar="K[,L...]",
+                        help="the kinds drawn in turn (default: every kind of clsdcam.sim.kinds; also "
+                             f"{', '.join(POINT_SCENES)}, the simulator's scenes of a few points)")
 
 
 def kind_list(text: str) -> list[str]:
@@ -292,6 +300,7 @@ def main(argv=None) -> int:
     parser = panel_parser(__doc__.splitlines()[0], "panel", named_scenes=False)
     parser.set_defaults(size=(128, 160))
     parser.add_argument("--scenes", type=int, default=20, help="random scenes (kinds in turn; default 20)")
+    add_kinds_option(parser)
     parser.add_argument("--marks", default="50,100,300",
                         help="the iterations judged (auto: every run to the default stop, judged at its final cube)")
     parser.add_argument("--sweep", type=int, default=5, help="fixed weights a decade either side (0: no sweep)")

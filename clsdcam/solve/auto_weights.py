@@ -19,23 +19,25 @@ a dark iterate counts as p = 1.
 Below it, too, the algorithm is told (``Algorithm.point_like``: ADMM lightens its non-negativity penalty).
 At or above it, the automatic stop may widen its tolerance (``wide_stop``, ``--converge auto``): the scenes the
 probe passes reach the model's answer, within the rules of docs/convergence.md, at a distance of 0.1 where the
-point-like ones need 0.05 ("The stop widened where the scene is not point-like"). On a scene of a few points, with
-fewer than ``FEW_POINTS`` lit voxels by the same iterate's count n = sum(v)/max(v) (p times the window's voxels, so
-a count that does not grow with the sensor as p falls), the tolerance narrows as
+point-like ones need 0.05 ("The stop widened where the scene is not point-like"). On a point-like scene of a few
+points, with fewer than ``FEW_POINTS`` lit voxels by the same iterate's count n = sum(v)/max(v) (p times the window's
+voxels: a count that does not fall as the sensor grows, as p does), the tolerance narrows as
 
     D = 0.05·(n / FEW_POINTS)²:
 
 so few unknowns are fixed so well by the measurement that a small distance is a large loss of PSNR, and at 0.05
-two of the simulator's two-point scenes stopped 0.6–0.8 dB short of their answer ("A stop for a few points").
-Where the probe does not run (no auto weight, or an algorithm without a threshold) the tolerance stays."""
+the simulator's two-point scenes stopped 0.3–5.3 dB short of their answer ("A stop for a few points"). With ten
+or so lit voxels D is under 0.001, and the solve may run to the cap. On small sensors, where a few points light
+enough of the frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no auto
+weight, or an algorithm without a threshold) the tolerance stays."""
 from __future__ import annotations
 
 from .noise import residual_noise
 
 AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
-# lit voxels (sum/peak) below which --converge auto narrows as their square: the simulator's two-point scenes in good
-# light count 32–43, its sixteen sources 105–157, the panels' narrow-line scenes 650 and up (docs/convergence.md,
-# "A stop for a few points")
+# lit voxels (sum/peak) below which --converge auto narrows as their square: the simulator's two-point scenes count
+# 33–98 (16–64 bands), its sixteen sources 160–210, the panels' narrow-line scenes 397 and up
+# (docs/convergence.md, "A stop for a few points")
 FEW_POINTS = 100
 
 
