@@ -95,13 +95,13 @@ def scene_indices(text: str) -> list[int]:
 
 
 def chosen_scenes(parser, args, seed: int) -> list[tuple[int, dict]]:
-    """The panel's (index, plan) pairs that --only keeps (all without it); an index outside the panel is the
-    parser's error."""
+    """The panel's (index, plan) pairs that --only keeps (all without it), of --kinds (:func:`add_kinds_option`) in
+    turn; an index outside the panel is the parser's error."""
     only = set(args.only or ())
     if not all(i < args.scenes for i in only):
         parser.error(f"--only {','.join(map(str, args.only))}: the panel has scenes 0 … {args.scenes - 1}")
-    kinds = getattr(args, "kinds", None) or panel_kinds()
-    return [(i, plan) for i, plan in enumerate(scene_plan(args.scenes, seed, kinds)) if not only or i in only]
+    plans = scene_plan(args.scenes, seed, args.kinds or panel_kinds())
+    return [(i, plan) for i, plan in enumerate(plans) if not only or i in only]
 
 
 def add_kinds_option(parser) -> None:
