@@ -222,19 +222,22 @@ def test_a_videos_next_frame_resumes_the_splits_and_duals(leds):
     assert state.carry is None and again.history[0]["data"] > 1.2 * first.history[-1]["data"]
 
 
-def test_the_balance_sets_each_axis_threshold_from_the_iterates_differences_and_keeps_the_unscaled_duals(tiny):
+@pytest.mark.parametrize("few_points", [False, True])
+def test_the_balance_sets_each_axis_threshold_from_the_iterates_differences_and_keeps_the_unscaled_duals(tiny,
+                                                                                                       few_points):
     """After the balance, each axis's soft threshold τw_d/μ₂,d is C times the RMS of D_d w (its β_d within the
-    range), the splits u_d = s_d + η_d and the unscaled duals μ₂,d·η_d are as before, and the state records the
-    penalties its duals are in; the divisors are the new penalties'."""
+    range; C the wider one on a scene of a few points), the splits u_d = s_d + η_d and the unscaled duals μ₂,d·η_d
+    are as before, and the state records the penalties its duals are in; the divisors are the new penalties'."""
     model, split = tiny
     state = random_state(split)
     state.w *= 0.02                    # differences whose threshold the range does not hold
     old = split.penalties
     u, unscaled = state.s + state.eta, [old.tv_along(a) * state.eta[i] for i, a in enumerate(split.axes)]
-    new = balance.balance(split, state, state.w)
+    new = balance.balance(split, state, state.w, few_points)
+    c = balance.THRESHOLD_FEW_POINTS if few_points else balance.THRESHOLD_OVER_RMS
     for i, axis in enumerate(split.axes):
         rms = np.sqrt(np.mean(difference(state.w, axis, np.empty_like(state.w)) ** 2))
-        assert split.threshold(axis) == pytest.approx(balance.THRESHOLD_OVER_RMS * rms, rel=1e-12)
+        assert split.threshold(axis) == pytest.approx(c * rms, rel=1e-12)
         assert np.allclose(new.tv_along(axis) * state.eta[i], unscaled[i], rtol=1e-12, atol=1e-15)
     assert len(set(new.tv_balance)) == 3 and all(b != 1.0 for b in new.tv_balance)
     assert np.allclose(state.s + state.eta, u, rtol=1e-12, atol=1e-15)
@@ -287,9 +290,9 @@ def test_the_balance_holds_each_axis_within_its_range_and_leaves_a_flat_axis(tin
     """A cube flat along λ keeps β_λ; the other axes' β_d are held within [1/BALANCE_RANGE, BALANCE_RANGE]."""
     model, split = tiny
     w = np.broadcast_to(RNG.random(split.shape[1:]), split.shape).copy()
-    betas = balance.balanced_penalties(split, balance.difference_rms(split, w)).tv_balance
+    betas = balance.balanced_penalties(split, balance.difference_rms(split, w), balance.THRESHOLD_OVER_RMS).tv_balance
     assert betas[0] == split.penalties.tv_balance[0]
-    tiny_rms = balance.balanced_penalties(split, {1: 1e-12, 2: 1e12}).tv_balance
+    tiny_rms = balance.balanced_penalties(split, {1: 1e-12, 2: 1e12}, balance.THRESHOLD_OVER_RMS).tv_balance
     assert tiny_rms[1:] == (balance.BALANCE_RANGE, 1.0 / balance.BALANCE_RANGE)
 
 

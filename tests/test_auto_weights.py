@@ -4,7 +4,7 @@ chooses from the residual's noise and the driver rescores under the new objectiv
 import numpy as np
 import pytest
 
-from clsdcam.algorithms.admm import Admm
+from clsdcam.algorithms.admm import Admm, balance
 from clsdcam.algorithms.admm.algorithm import NONNEG, NONNEG_POINT_LIKE, TV
 from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
@@ -46,6 +46,7 @@ class Residual:
         self.residual_buffer = np.random.default_rng(0).normal(0, sigma, (256, 256))
         self.x, self.iterations, self.rescored, self.notes = None, AUTO_AT, [], []
         self.cube, self.model, self.algorithm, self.told_point_like = cube, self, self, 0
+        self.told_few_points = None
 
     def solution(self, x):
         return self.cube
@@ -65,8 +66,9 @@ class Residual:
     def note(self, *lines):
         self.notes += lines
 
-    def point_like(self):
+    def point_like(self, few_points):
         self.told_point_like += 1
+        self.told_few_points = few_points
 
 
 def test_act_chooses_from_the_noise_and_rescores():
@@ -126,10 +128,11 @@ def test_an_algorithm_without_a_threshold_is_never_point_like():
     assert weights.priors[0].relative == pytest.approx(weights.priors[0].auto_weight.for_noise(0.003), rel=0.05)
 
 
-def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene():
+def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monkeypatch):
     """Through the solver: ADMM's 30-iteration cube (the sensor window it returns) is what ``mean_over_peak`` reads,
     three lit voxels in good light count as point-like and take the lighter weight, and ADMM its point-like
-    non-negativity penalty; FISTA reads nothing."""
+    non-negativity penalty, and, a scene of a few points, the balance after the probe its wider thresholds; FISTA
+    reads nothing."""
     cube = np.zeros((8, 48, 64), np.float32)
     for band, y, x in ((1, 20, 20), (4, 30, 40), (6, 15, 45)):
         cube[band, y, x] = 1.0
@@ -142,6 +145,10 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene():
     assert rule.for_noise(noise, True) < 0.5 * rule.for_noise(noise)
     penalties = admm.state.carry[0].penalties          # μ₂ and μ₃ share their scale (penalties_for)
     assert penalties.nonneg / penalties.tv == pytest.approx(NONNEG_POINT_LIKE / TV, rel=1e-12)
+    told, real = [], balance.balance
+    monkeypatch.setattr(balance, "balance", lambda *a: told.append(a[3]) or real(*a))
+    reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT + 1, algorithm="admm")
+    assert admm.attrs["lit_voxels"] < FEW_POINTS and told == [True]
     fista = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="fista")
     assert "mean_over_peak" not in fista.attrs
     assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))
@@ -153,19 +160,21 @@ def lit_voxels(n: int, shape=(4, 128, 128)) -> np.ndarray:
     return cube
 
 
-@pytest.mark.parametrize("cube, tolerance, said", [
-    (lit_voxels(120), CONVERGE, None),                   # point-like (p = 120/65536), not a few points: CONVERGE
-    (lit_voxels(40), CONVERGE * (40 / FEW_POINTS) ** 2, "a scene of a few points: 40 lit voxels"),
-    (one_lit_pixel(), CONVERGE * (1 / FEW_POINTS) ** 2, "a scene of a few points: 1 lit voxels"),
-    (np.full((4, 32, 32), 0.5), CONVERGE_WIDE, "not a point-like scene"),
-    (np.zeros((4, 32, 32)), CONVERGE_WIDE, "not a point-like scene"),   # a dark iterate counts as p = 1
+@pytest.mark.parametrize("cube, tolerance, said, few_points", [
+    (lit_voxels(120), CONVERGE, None, False),            # point-like (p = 120/65536), not a few points: CONVERGE
+    (lit_voxels(40), CONVERGE * (40 / FEW_POINTS) ** 2, "a scene of a few points: 40 lit voxels", True),
+    (one_lit_pixel(), CONVERGE * (1 / FEW_POINTS) ** 2, "a scene of a few points: 1 lit voxels", True),
+    (np.full((4, 32, 32), 0.5), CONVERGE_WIDE, "not a point-like scene", None),
+    (np.zeros((4, 32, 32)), CONVERGE_WIDE, "not a point-like scene", None),   # a dark iterate counts as p = 1
 ])
-def test_the_stop_widens_on_a_spread_scene_and_narrows_as_the_square_of_a_few_points(cube, tolerance, said):
+def test_the_stop_widens_on_a_spread_scene_and_narrows_as_the_square_of_a_few_points(cube, tolerance, said,
+                                                                                     few_points):
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
     point-like threshold, CONVERGE below it, CONVERGE·(n/FEW_POINTS)² below FEW_POINTS; a note says so where it
-    moved."""
+    moved. The algorithm hears whether a point-like scene is one of a few points (None: not told)."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)
+    assert stand_in.told_few_points is few_points
     assert stand_in.rules.converge == pytest.approx(tolerance, rel=1e-12)
     assert weights.chosen["lit_voxels"] == pytest.approx(cube.sum() / cube.max() if cube.any() else cube.size)
     stops = [line for line in stand_in.notes if line.startswith("stop: --converge auto, ")]

@@ -319,6 +319,28 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
     assert "| 0 | piecewise, standard | alpha 1, balance_at 1e+09 | 0 |" in out
 
 
+def test_told_point_like_lightens_admms_nonneg_penalty_at_the_probes_iteration_and_restores_the_method():
+    """A solve at a given weight reads no probe: told, ADMM's μ₃ falls to NONNEG_POINT_LIKE/NONNEG of its value
+    after AUTO_AT iterations, as the default's does on a point-like scene; not told, or before that iteration, or
+    after the context, it keeps its penalty."""
+    from clsdcam.algorithms.admm import algorithm
+    from clsdcam.sim import simulate
+
+    sim = simulate(scene="points", shape=(24, 32), n_bands=4, seed=2)
+    plain = Admm.iterate
+
+    def nonneg(told: bool, iters: int) -> float:
+        settings = Settings(iters=iters, algorithm="admm", tv=1e-3)
+        with bench_converged.told_point_like(told):
+            result = Solver(sim.calibration, settings=settings).solve(sim.measurement)
+        return result.state.carry[0].penalties.nonneg
+
+    kept = nonneg(False, AUTO_AT + 2)
+    assert nonneg(True, AUTO_AT + 2) == pytest.approx(kept * algorithm.NONNEG_POINT_LIKE / algorithm.NONNEG, rel=1e-12)
+    assert nonneg(True, AUTO_AT) == kept
+    assert Admm.iterate is plain
+
+
 def test_anderson_point_is_an_affine_maps_fixed_point_after_as_many_differences_as_dimensions():
     """For T(q) = Mq + c in R³, three differences span the space: the Anderson point is the fixed point (I − M)⁻¹c,
     which the plain iterates are still far from; with no difference it is the newest map."""

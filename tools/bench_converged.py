@@ -31,9 +31,10 @@ list of kinds) draws those kinds in turn: the simulator's scenes of a few points
 among them, which the panel's five kinds are not.
 
 ``--variants 'alpha=1.7,tv=0.003;alpha=1'`` measures ADMM's constants instead (``clsdcam.algorithms.admm``'s DATA,
-TV, NONNEG, RELAXATION and BALANCE_AT, and THRESHOLD_OVER_RMS of its balance, by the names data, tv, nonneg, alpha,
-balance_at and balance; ``balance_at=1e9``: no balance): each variant runs ``--variant-iters`` at the
-scene's weight, scored every 10 iterations, and the table gives the mark from which it stays within the rules and
+TV, NONNEG, RELAXATION and BALANCE_AT, and THRESHOLD_OVER_RMS and THRESHOLD_FEW_POINTS of its balance, by the names
+data, tv, nonneg, alpha, balance_at, balance and few_balance; ``balance_at=1e9``: no balance): each variant runs
+``--variant-iters`` at the scene's weight, told what the default's probe found (point-like, a few points), scored
+every 10 iterations, and the table gives the mark from which it stays within the rules and
 where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``variants.json``). The names
 ``momentum`` (restart factor η), ``anderson`` (memory m) and ``spectral`` (period T) run one of
 :mod:`admm_acceleration`'s accelerations (host steps; "restarts" counts its restarts, dropped points or penalty
@@ -55,11 +56,12 @@ from admm_acceleration import ACCELERATIONS, accelerated
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text, timed_run
 from bench_panel import (add_kinds_option, chosen_scenes, panel_scene, scene_indices, progress, scene_done,
                          scene_name)
+from clsdcam.algorithms.admm.algorithm import POINT_LIKE_BELOW
 from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
-from clsdcam.solve.auto_weights import AUTO_AT
+from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS
 from clsdcam.solve.convergence import DistanceEstimate
 from clsdcam.solve.solver import Settings
 
@@ -105,10 +107,35 @@ def reference_cube(sim, plan: dict, tau: float, algorithm: str, iters: int, cach
     return np.load(cached(sim, plan, tau, algorithm, iters, cache)[1])["cube"]
 
 
-def scene_weight(sim, weight_from: str) -> float:
-    """The scene's weight τ: the one today's run (``weight_from`` "today") or the default's ``--tv auto`` chose."""
+def scene_weight(sim, weight_from: str) -> tuple[float, dict]:
+    """(τ, probe): the weight today's run (``weight_from`` "today") or the default's ``--tv auto`` chose, and what
+    that run's probe tells ADMM, :func:`told_point_like`'s arguments (FISTA's run reads no probe: nothing)."""
     weight_run, _ = timed_solve(sim, TODAY if weight_from == "today" else {})
-    return float(weight_run.attrs["tv_chosen"])
+    likeness, lit = weight_run.attrs.get("mean_over_peak"), weight_run.attrs.get("lit_voxels")
+    point_like = likeness is not None and likeness < POINT_LIKE_BELOW
+    return float(weight_run.attrs["tv_chosen"]), {"point_like": point_like, "few_points": point_like and lit < FEW_POINTS}
+
+
+@contextmanager
+def told_point_like(point_like: bool = False, few_points: bool = False):
+    """While it lasts, where ``point_like``, every ADMM solve is told so before its iteration AUTO_AT + 1 (and
+    whether the scene is ``few_points``), as the default's probe tells it (``Admm.point_like``): a run at a given
+    weight reads no probe, so without this it would keep the penalties of the spread scenes where the default's
+    change."""
+    from clsdcam.algorithms.admm.algorithm import Admm
+
+    plain = Admm.iterate
+
+    def iterate(algorithm, problem):
+        if algorithm._iterations == AUTO_AT:
+            algorithm.point_like(few_points)
+        return plain(algorithm, problem)
+
+    Admm.iterate = iterate if point_like else plain
+    try:
+        yield
+    finally:
+        Admm.iterate = plain
 
 
 def reference_run(sim, plan: dict, tau: float, algorithm: str, iters: int, cache: Path) -> dict:
@@ -174,7 +201,7 @@ def settled_within(points: list[dict], ref: dict) -> int | None:
 # a constant's name -> (its module in clsdcam.algorithms.admm, the constant)
 ADMM_CONSTANTS = {"data": ("algorithm", "DATA"), "tv": ("algorithm", "TV"), "nonneg": ("algorithm", "NONNEG"),
                   "alpha": ("algorithm", "RELAXATION"), "balance_at": ("algorithm", "BALANCE_AT"),
-                  "balance": ("balance", "THRESHOLD_OVER_RMS")}
+                  "balance": ("balance", "THRESHOLD_OVER_RMS"), "few_balance": ("balance", "THRESHOLD_FEW_POINTS")}
 STARTS = {"fista_start": "fista", "answer_start": "admm"}   # a start's name -> the algorithm that makes its cube
 VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS, *STARTS)  # the constants, the accelerations, the starts
 
@@ -222,12 +249,13 @@ def variant_start(sim, tau: float, variant: dict) -> tuple:
 def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
     """One scene's ADMM variants at its weight (today's or the default's ``--tv auto`` choice) against its reference."""
     sim = panel_scene(plan, shape, bands)
-    tau = scene_weight(sim, args.weight_from)
+    tau, probe = scene_weight(sim, args.weight_from)
     ref = reference({a: reference_run(sim, plan, tau, a, args.reference_iters, cache) for a in REFERENCE_ALGORITHMS})
     rows = []
     for variant in args.variants:
         x0, start_seconds = variant_start(sim, tau, variant)
-        with admm_constants(variant), accelerated(variant) as events:
+        told = {} if any(name in variant for name in ACCELERATIONS) else probe
+        with admm_constants(variant), accelerated(variant) as events, told_point_like(**told):
             result, seconds = timed_solve(sim, {"tv": tau, "iters": args.variant_iters, "algorithm": "admm"},
                                           range(10, args.variant_iters + 1, 10), x0)
         run = {"points": curve(sim, result), "change": [r["change"] for r in result.history]}
@@ -236,7 +264,7 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
                      "ms_per_iteration": 1e3 * seconds / args.variant_iters, "restarts": events["restarts"],
                      "start_iterations": start_seconds / seconds * args.variant_iters,
                      "balance": balance_factors(result), "final": run["points"][-1]})
-    return {**plan, "tv": tau, "reference": ref, "variants": rows}
+    return {**plan, "tv": tau, **probe, "reference": ref, "variants": rows}
 
 
 def balance_factors(result) -> list | None:

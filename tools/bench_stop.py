@@ -22,7 +22,8 @@ reconstruction's error); and per estimate and ``--tolerances`` value, the iterat
 falls below it, the true distance then, and whether the run is within the rules from there on. Writes
 ``stop.json``, ``stop.md`` and ``stop.png`` (the true distance and both estimates against iterations, one panel a
 scene). The run is at a fixed τ from its first iteration (the default's own run chooses τ at iteration 30 and
-forgets its windows there).
+forgets its windows there); at iteration 30 it is told what the default's probe found (a point-like scene, a few
+points: ``bench_converged.told_point_like``), so its penalties are the default's.
 """
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ import numpy as np
 
 from bench_accuracy import Where, add_backend_option, panel_parser, report, size_text
 from bench_converged import (REFERENCE_ALGORITHMS, add_panel_options, reference, reference_cube, reference_run,
-                             scene_weight, settled_within, timed_solve, within)
+                             scene_weight, settled_within, timed_solve, told_point_like, within)
 from bench_panel import chosen_scenes, panel_scene, scene_done
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
@@ -91,11 +92,12 @@ def stop(marks: list[dict], name: str, tolerance: float) -> dict | None:
 
 def run_scene(plan: dict, args, cache: Path) -> dict:
     sim = panel_scene(plan, args.size, args.bands)
-    tau = scene_weight(sim, args.weight_from)
+    tau, probe = scene_weight(sim, args.weight_from)
     ref = reference({a: reference_run(sim, plan, tau, a, args.reference_iters, cache)
                      for a in REFERENCE_ALGORITHMS})
     xstar = reference_cube(sim, plan, tau, "admm", args.reference_iters, cache)
-    marks = traced_run(sim, tau, args.iters, args.every, xstar, ref)
+    with told_point_like(**probe):
+        marks = traced_run(sim, tau, args.iters, args.every, xstar, ref)
     return {**plan, "tv": tau, "reference": ref, "error": relative(sim.truth, xstar), "marks": marks,
             "settled": settled(marks, ref),
             "stops": {name: [stop(marks, name, t) for t in args.tolerances] for name in ESTIMATES}}

@@ -69,7 +69,7 @@ class AutoWeights:
         self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)
         if point_like:
-            driver.algorithm.point_like()
+            driver.algorithm.point_like(self.chosen["lit_voxels"] < FEW_POINTS)
         if self.wide_stop and "mean_over_peak" in self.chosen:
             self._tune_stop(driver)
 

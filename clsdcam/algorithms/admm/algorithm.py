@@ -93,6 +93,7 @@ class Admm(Algorithm):
         self.state = None
         self._resumed = None
         self._iterations = 0       # this solve's, for the TV penalties' balance at BALANCE_AT (balance.py)
+        self._few_points = False   # the probe's word that the scene is a few points (point_like): the balance's C
 
     def iterate(self, problem) -> dict:
         if self.splitting is None:
@@ -100,7 +101,7 @@ class Admm(Algorithm):
         if self._iterations == BALANCE_AT and self.splitting.axes and self.state.penalties.tv_balance is None:
             from .balance import balance
 
-            balance(self.splitting, self.state, self.backend.to_host(self.state.w))
+            balance(self.splitting, self.state, self.backend.to_host(self.state.w), self._few_points)
         self._iterations += 1
         data, (step, norm) = self.splitting.iterate(self.state)
         return {"data": data, "change": ratio(step, norm)}
@@ -133,9 +134,11 @@ class Admm(Algorithm):
             return
         self.state, _ = self.splitting.start(point)
 
-    def point_like(self) -> None:
+    def point_like(self, few_points: bool = False) -> None:
         """The scene is point-like (the auto weights' probe, :mod:`clsdcam.solve.auto_weights`): μ₃ from ``NONNEG`` to
-        ``NONNEG_POINT_LIKE`` of the same scale, the solve going on from the same point (:func:`.balance.repenalise`)."""
+        ``NONNEG_POINT_LIKE`` of the same scale, the solve going on from the same point (:func:`.balance.repenalise`);
+        on a scene of ``few_points`` the TV balance still to come sets wider thresholds (:mod:`.balance`)."""
+        self._few_points = few_points
         if self.state is not None:
             from .balance import repenalise
 

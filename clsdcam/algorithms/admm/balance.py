@@ -28,6 +28,9 @@ from .host_steps import difference
 from .terms import Penalties, SplitState, SplittingBase
 
 THRESHOLD_OVER_RMS = 2.0      # C: chosen on the tuning panel (docs/convergence.md)
+# C on a scene of a few points (the probe's count, clsdcam.solve.auto_weights.FEW_POINTS): the differences' RMS over
+# a black cube is far below the points' own edges (docs/convergence.md, "Wider TV thresholds for a few points")
+THRESHOLD_FEW_POINTS = 16.0
 BALANCE_RANGE = 64.0          # β_d within [1/64, 64]
 
 
@@ -38,23 +41,25 @@ def difference_rms(split: SplittingBase, w: np.ndarray) -> dict[int, float]:
             for axis in split.axes}
 
 
-def balanced_penalties(split: SplittingBase, rms: dict[int, float]) -> Penalties:
-    """The penalties with each active axis's β_d = τw_d/(C·rms_d·μ₂) (the module docstring); an axis whose
-    differences are all zero, or the whole TV when its weight is zero, keeps its β_d."""
+def balanced_penalties(split: SplittingBase, rms: dict[int, float], threshold_over_rms: float) -> Penalties:
+    """The penalties with each active axis's β_d = τw_d/(C·rms_d·μ₂), C = ``threshold_over_rms`` (the module
+    docstring); an axis whose differences are all zero, or the whole TV when its weight is zero, keeps its β_d."""
     p, tau = split.penalties, split.tv.weight
     betas = [1.0, 1.0, 1.0] if p.tv_balance is None else list(p.tv_balance)
     for axis, value in rms.items():
         if value > 0 and tau > 0:
-            beta = tau * split.tv.axis_weights[axis] / (THRESHOLD_OVER_RMS * value * p.tv)
+            beta = tau * split.tv.axis_weights[axis] / (threshold_over_rms * value * p.tv)
             betas[axis] = float(np.clip(beta, 1.0 / BALANCE_RANGE, BALANCE_RANGE))
     return replace(p, tv_balance=tuple(betas))
 
 
-def balance(split: SplittingBase, state: SplitState, w_host: np.ndarray) -> Penalties:
-    """Set the balanced penalties from the iterate ``w_host`` (w on the host), the TV duals rescaled to keep the
-    unscaled ones; the state records them (a video's next frame resumes with them). Returns them."""
+def balance(split: SplittingBase, state: SplitState, w_host: np.ndarray, few_points: bool = False) -> Penalties:
+    """Set the balanced penalties from the iterate ``w_host`` (w on the host), C the ``few_points`` one on a scene
+    of a few points, the TV duals rescaled to keep the unscaled ones; the state records them (a video's next frame
+    resumes with them). Returns them."""
     old = split.penalties
-    new = balanced_penalties(split, difference_rms(split, w_host))
+    threshold = THRESHOLD_FEW_POINTS if few_points else THRESHOLD_OVER_RMS
+    new = balanced_penalties(split, difference_rms(split, w_host), threshold)
     split.rescale_tv_duals(state, {axis: old.tv_along(axis) / new.tv_along(axis) for axis in split.axes})
     split.set_penalties(new)
     state.penalties = new
