@@ -16,7 +16,8 @@ blurrier. Below it, a rule with a ``point_noise`` lightens the weight in good li
 (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`). A warm start from a cube (``x0``) reads its own iterate there;
 a dark iterate counts as p = 1.
 
-Below it, too, the algorithm is told (``Algorithm.point_like``: ADMM lightens its non-negativity penalty).
+Below it, too, the algorithm is told, and whether the scene is one of a few points (below): ``Algorithm.point_like``
+(ADMM lightens its non-negativity penalty, and on a few points widens its TV thresholds).
 At or above it, the automatic stop may widen its tolerance (``wide_stop``, ``--converge auto``): the scenes the
 probe passes reach the model's answer, within the rules of docs/convergence.md, at a distance of 0.1 where the
 point-like ones need 0.05 ("The stop widened where the scene is not point-like"). On a point-like scene of a few

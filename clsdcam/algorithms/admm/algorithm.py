@@ -10,7 +10,8 @@ scales (so a brighter scene, another PSF normalisation or filter gain needs no n
 μ₂ = ``TV``·μ₁·max|Ĥ|², μ₃ = ``NONNEG``·μ₁·max|Ĥ|² (:func:`penalties_for`; how they were chosen, and why residual
 balancing is not used: docs/admm.md). After ``BALANCE_AT`` iterations the TV split's is set along each axis from the
 iterate's differences, once (:mod:`.balance`); where the auto weights' probe finds the scene point-like (at the same
-iteration), the non-negativity split's drops to ``NONNEG_POINT_LIKE`` (:meth:`Admm.point_like`).
+iteration), the non-negativity split's drops to ``NONNEG_POINT_LIKE``, and on a scene of a few points the balance
+widens its thresholds (:meth:`Admm.point_like`).
 
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals

@@ -9,7 +9,10 @@ differences along it:
 
     μ₂,d = τw_d / (C·rms(D_d w)),   C = THRESHOLD_OVER_RMS,
 
-held within a factor ``BALANCE_RANGE`` of the camera's μ₂ (a flat or black cube's RMS says nothing). The unscaled
+held within a factor ``BALANCE_RANGE`` of the camera's μ₂ (a flat or black cube's RMS says nothing). On a scene of a
+few points (the probe's count, :mod:`clsdcam.solve.auto_weights`) C is ``THRESHOLD_FEW_POINTS``: the RMS over a black
+cube is set by how few voxels are lit, far below the points' own edges, and C = 2 there left ADMM hundreds to
+thousands of iterations slower (docs/convergence.md, "Wider TV thresholds for a few points"). The unscaled
 duals μ₂,d·η_d are kept (η_d ← r_d·η_d, s_d ← s_d + (1 − r_d)η_d with r_d = μ₂,d/μ₂,d', so u_d = s_d + η_d stays):
 the iteration goes on from the same point, with one new divisor. The RMS is read on the host (one download of w,
 once per solve), so both backends set the same penalties.
