@@ -162,6 +162,7 @@ def lit_voxels(n: int, shape=(4, 128, 128)) -> np.ndarray:
 
 @pytest.mark.parametrize("cube, tolerance, said, few_points", [
     (lit_voxels(120), CONVERGE, None, False),            # point-like (p = 120/65536), not a few points: CONVERGE
+    (lit_voxels(FEW_POINTS), CONVERGE, None, False),     # a few points are fewer than FEW_POINTS
     (lit_voxels(40), CONVERGE * (40 / FEW_POINTS) ** 2, "a scene of a few points: 40 lit voxels", True),
     (one_lit_pixel(), CONVERGE * (1 / FEW_POINTS) ** 2, "a scene of a few points: 1 lit voxels", True),
     (np.full((4, 32, 32), 0.5), CONVERGE_WIDE, "not a point-like scene", None),

@@ -296,8 +296,12 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
     modules' constants are as before afterwards."""
     from clsdcam.algorithms.admm import algorithm, balance
 
-    constants = lambda: (algorithm.RELAXATION, algorithm.TV, algorithm.BALANCE_AT, balance.THRESHOLD_OVER_RMS)
+    constants = lambda: (algorithm.RELAXATION, algorithm.TV, algorithm.BALANCE_AT, balance.THRESHOLD_OVER_RMS,
+                         balance.THRESHOLD_FEW_POINTS)
     before = constants()
+    with bench_converged.admm_constants({"few_balance": 5.0, "balance": 3.0}):
+        assert (balance.THRESHOLD_FEW_POINTS, balance.THRESHOLD_OVER_RMS) == (5.0, 3.0)
+    assert constants() == before
     bench_converged.main([*ONE_PIECEWISE_SCENE, "--variants",
                           "alpha=1,balance_at=1e9;alpha=1.7,tv=0.003,balance=3,balance_at=40",
                           "--variant-iters", "200", "--replay", "1e9", "--cache", str(tmp_path / "cache"),
@@ -319,25 +323,29 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
     assert "| 0 | piecewise, standard | alpha 1, balance_at 1e+09 | 0 |" in out
 
 
-def test_told_point_like_lightens_admms_nonneg_penalty_at_the_probes_iteration_and_restores_the_method():
+def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_restores_the_method():
     """A solve at a given weight reads no probe: told, ADMM's μ₃ falls to NONNEG_POINT_LIKE/NONNEG of its value
-    after AUTO_AT iterations, as the default's does on a point-like scene; not told, or before that iteration, or
-    after the context, it keeps its penalty."""
+    after AUTO_AT iterations, as the default's does on a point-like scene, and told a few points its TV balance at
+    that iteration takes the wider thresholds; not told, or before that iteration, or after the context, it keeps
+    its penalties."""
     from clsdcam.algorithms.admm import algorithm
     from clsdcam.sim import simulate
 
     sim = simulate(scene="points", shape=(24, 32), n_bands=4, seed=2)
     plain = Admm.iterate
 
-    def nonneg(told: bool, iters: int) -> float:
+    def penalties(iters: int, **told):
         settings = Settings(iters=iters, algorithm="admm", tv=1e-3)
-        with bench_converged.told_point_like(told):
+        with bench_converged.told_point_like(**told):
             result = Solver(sim.calibration, settings=settings).solve(sim.measurement)
-        return result.state.carry[0].penalties.nonneg
+        return result.state.carry[0].penalties
 
-    kept = nonneg(False, AUTO_AT + 2)
-    assert nonneg(True, AUTO_AT + 2) == pytest.approx(kept * algorithm.NONNEG_POINT_LIKE / algorithm.NONNEG, rel=1e-12)
-    assert nonneg(True, AUTO_AT) == kept
+    kept, point_like = penalties(AUTO_AT + 2), penalties(AUTO_AT + 2, point_like=True)
+    few = penalties(AUTO_AT + 2, point_like=True, few_points=True)
+    assert point_like.nonneg == pytest.approx(kept.nonneg * algorithm.NONNEG_POINT_LIKE / algorithm.NONNEG, rel=1e-12)
+    assert few.nonneg == point_like.nonneg and point_like.tv_balance == kept.tv_balance
+    assert all(f < p for f, p in zip(few.tv_balance, point_like.tv_balance))     # C = 16 against 2: lower penalties
+    assert penalties(AUTO_AT, point_like=True).nonneg == kept.nonneg
     assert Admm.iterate is plain
 
 

@@ -33,8 +33,8 @@ among them, which the panel's five kinds are not.
 ``--variants 'alpha=1.7,tv=0.003;alpha=1'`` measures ADMM's constants instead (``clsdcam.algorithms.admm``'s DATA,
 TV, NONNEG, RELAXATION and BALANCE_AT, and THRESHOLD_OVER_RMS and THRESHOLD_FEW_POINTS of its balance, by the names
 data, tv, nonneg, alpha, balance_at, balance and few_balance; ``balance_at=1e9``: no balance): each variant runs
-``--variant-iters`` at the scene's weight, told what the default's probe found (point-like, a few points), scored
-every 10 iterations, and the table gives the mark from which it stays within the rules and
+``--variant-iters`` at the scene's weight, told what the default's probe found (point-like, a few points; not an
+accelerated variant, below), scored every 10 iterations, and the table gives the mark from which it stays within the rules and
 where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``variants.json``). The names
 ``momentum`` (restart factor η), ``anderson`` (memory m) and ``spectral`` (period T) run one of
 :mod:`admm_acceleration`'s accelerations (host steps; "restarts" counts its restarts, dropped points or penalty
@@ -121,7 +121,8 @@ def told_point_like(point_like: bool = False, few_points: bool = False):
     """While it lasts, where ``point_like``, every ADMM solve is told so before its iteration AUTO_AT + 1 (and
     whether the scene is ``few_points``), as the default's probe tells it (``Admm.point_like``): a run at a given
     weight reads no probe, so without this it would keep the penalties of the spread scenes where the default's
-    change."""
+    change. Only for solves at a given weight: a solve with ``--tv auto`` reads its own probe and would be told
+    twice."""
     from clsdcam.algorithms.admm.algorithm import Admm
 
     plain = Admm.iterate

@@ -36,7 +36,8 @@ from __future__ import annotations
 from .noise import residual_noise
 
 AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
-# lit voxels (sum/peak) below which --converge auto narrows as their square: the simulator's two-point scenes count
+# lit voxels (sum/peak) below which --converge auto narrows as their square, and ADMM's TV balance widens its
+# thresholds (Algorithm.point_like's few_points): the simulator's two-point scenes count
 # 33–98 (16–64 bands), its sixteen sources 160–210, the panels' narrow-line scenes 397 and up
 # (docs/convergence.md, "A stop for a few points")
 FEW_POINTS = 100
