@@ -61,7 +61,7 @@ from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
-from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS
+from clsdcam.solve.auto_weights import AUTO_AT, probe_reading
 from clsdcam.solve.convergence import DistanceEstimate
 from clsdcam.solve.solver import Settings
 
@@ -111,9 +111,8 @@ def scene_weight(sim, weight_from: str) -> tuple[float, dict]:
     """(τ, probe): the weight today's run (``weight_from`` "today") or the default's ``--tv auto`` chose, and what
     that run's probe tells ADMM, :func:`told_point_like`'s arguments (FISTA's run reads no probe: nothing)."""
     weight_run, _ = timed_solve(sim, TODAY if weight_from == "today" else {})
-    likeness, lit = weight_run.attrs.get("mean_over_peak"), weight_run.attrs.get("lit_voxels")
-    point_like = likeness is not None and likeness < POINT_LIKE_BELOW
-    return float(weight_run.attrs["tv_chosen"]), {"point_like": point_like, "few_points": point_like and lit < FEW_POINTS}
+    point_like, few_points = probe_reading(weight_run.attrs, POINT_LIKE_BELOW)
+    return float(weight_run.attrs["tv_chosen"]), {"point_like": point_like, "few_points": few_points}
 
 
 @contextmanager

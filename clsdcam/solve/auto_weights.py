@@ -43,6 +43,15 @@ AUTO_AT = 30               # auto weights are chosen from the noise of this iter
 FEW_POINTS = 100
 
 
+def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool]:
+    """(point-like, a few points) from the probe's attributes ``mean_over_peak`` (p) and ``lit_voxels`` (n) of a
+    solve or its result: p below the algorithm's threshold, and then n below FEW_POINTS; (False, False) where the
+    probe did not measure."""
+    p = attrs.get("mean_over_peak")
+    point_like = p is not None and p < point_like_below
+    return point_like, point_like and attrs["lit_voxels"] < FEW_POINTS
+
+
 class AutoWeights:
     """The auto-weighted priors of one solve, chosen once at AUTO_AT."""
 
@@ -61,7 +70,8 @@ class AutoWeights:
         """Choose from the noise σ̂ of the residual at the driver's iterate, noted to its observers; the driver
         rescores under the new F."""
         noise = residual_noise(problem.backend.to_host(problem.residual(driver.x)))
-        point_like = self._point_like(problem, driver.x)
+        self._measure_likeness(problem, driver.x)
+        point_like, few_points = probe_reading(self.chosen, self.point_like_below)
         for prior in (prior for prior in self.priors if prior.auto):
             prior.set_relative(prior.auto_weight.for_noise(noise, point_like))
             prior.auto = False
@@ -71,34 +81,33 @@ class AutoWeights:
         self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)
         if point_like:
-            driver.algorithm.point_like(self.chosen["lit_voxels"] < FEW_POINTS)
+            driver.algorithm.point_like(few_points)
         if self.wide_stop and "mean_over_peak" in self.chosen:
-            self._tune_stop(driver)
+            self._tune_stop(driver, point_like, few_points)
 
-    def _tune_stop(self, driver) -> None:
-        """``--converge auto`` from the probe's p and n (the module docstring): widened on a scene that is not
+    def _tune_stop(self, driver, point_like: bool, few_points: bool) -> None:
+        """``--converge auto`` from the probe's reading (the module docstring): widened on a scene that is not
         point-like, narrowed as n² on a scene of a few points; said in a note."""
         p, n = self.chosen["mean_over_peak"], self.chosen["lit_voxels"]
-        if p >= self.point_like_below:
+        if not point_like:
             driver.widen_stop(self.wide_stop)
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "
                         f"{p:.2g} ≥ {self.point_like_below:g})")
-        elif n < FEW_POINTS:
+        elif few_points:
             driver.narrow_stop(driver.rules.converge * (n / FEW_POINTS) ** 2)
             driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a scene of a few points: {n:.3g} lit "
                         f"voxels < {FEW_POINTS})")
 
-    def _point_like(self, problem, x) -> bool:
-        """Whether the iterate's window has p = mean/max below the algorithm's threshold (p kept as the attribute
-        ``mean_over_peak``, and n = p times the window's voxels as ``lit_voxels``); not measured where the threshold
-        is 0."""
+    def _measure_likeness(self, problem, x) -> None:
+        """The iterate's window's p = mean/max, kept as the attribute ``mean_over_peak``, and n = p times the window's
+        voxels as ``lit_voxels`` (:func:`probe_reading` reads them); not measured where the algorithm's threshold is
+        0."""
         if not self.point_like_below:
-            return False
+            return
         window = problem.model.window(problem.solution(x))
         peak = float(window.max())
         self.chosen["mean_over_peak"] = float(window.mean(dtype=float)) / peak if peak > 0 else 1.0
         self.chosen["lit_voxels"] = self.chosen["mean_over_peak"] * window.size
-        return self.chosen["mean_over_peak"] < self.point_like_below
 
     def unchosen(self, driver) -> None:
         """Say, for each weight still pending after the driver's solve (fewer than AUTO_AT iterations), that the
