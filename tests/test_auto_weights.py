@@ -10,6 +10,7 @@ from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.sim import simulate
+from clsdcam.solve import settings
 from clsdcam.solve.priors import AutoWeight, TotalVariation, build_priors
 from clsdcam.solve.driver import Driver, Rules
 from clsdcam.solve.settings import CONVERGE, CONVERGE_WIDE, Settings
@@ -160,11 +161,14 @@ def lit_voxels(n: int, shape=(4, 128, 128)) -> np.ndarray:
     return cube
 
 
+MANY = (16, 128, 128)     # FEW_POINTS lit voxels of these are point-like (p = 500/262144)
+
+
 @pytest.mark.parametrize("cube, tolerance, said, few_points", [
-    (lit_voxels(120), CONVERGE, None, False),            # point-like (p = 120/65536), not a few points: CONVERGE
-    (lit_voxels(FEW_POINTS), CONVERGE, None, False),     # a few points are fewer than FEW_POINTS
-    (lit_voxels(40), CONVERGE * (40 / FEW_POINTS) ** 2, "a scene of a few points: 40 lit voxels", True),
-    (one_lit_pixel(), CONVERGE * (1 / FEW_POINTS) ** 2, "a scene of a few points: 1 lit voxels", True),
+    (lit_voxels(FEW_POINTS, MANY), CONVERGE, None, False),     # point-like, not a few points: CONVERGE
+    (lit_voxels(FEW_POINTS - 1, MANY), CONVERGE * (499 / FEW_POINTS) ** 2, "few lit voxels: 499 < 500", True),
+    (lit_voxels(120), CONVERGE * (120 / FEW_POINTS) ** 2, "a point-like scene of few lit voxels: 120 < 500", True),
+    (one_lit_pixel(), CONVERGE * (1 / FEW_POINTS) ** 2, "few lit voxels: 1 < 500", True),
     (np.full((4, 32, 32), 0.5), CONVERGE_WIDE, "not a point-like scene", None),
     (np.zeros((4, 32, 32)), CONVERGE_WIDE, "not a point-like scene", None),   # a dark iterate counts as p = 1
 ])
@@ -172,7 +176,8 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_as_the_square_of_a_few_po
                                                                                      few_points):
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
     point-like threshold, CONVERGE below it, CONVERGE·(n/FEW_POINTS)² below FEW_POINTS; a note says so where it
-    moved. The algorithm hears whether a point-like scene is one of a few points (None: not told)."""
+    moved. The algorithm hears whether a point-like scene is one of a few points, fewer than FEW_POINTS (None: not
+    told)."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)
     assert stand_in.told_few_points is few_points
@@ -208,11 +213,12 @@ def test_a_converge_that_is_neither_auto_nor_positive_is_refused(converge):
         Settings(converge=converge)
 
 
-def test_a_solve_widens_its_stop_on_a_spread_scene_and_narrows_it_on_a_few_points():
+def test_a_solve_widens_its_stop_on_a_spread_scene_and_narrows_it_on_a_few_points(monkeypatch):
     """Through the solver, --iters auto: a piecewise scene stops at CONVERGE_WIDE and says so in its attributes, and
-    keeps ADMM's non-negativity penalty; three lit voxels (point-like, a few points) stop at CONVERGE·(n/FEW_POINTS)²
-    with their count n in the attributes; a tolerance the user gives is kept; a warm start from the first solve's
-    state, whose weights it carries, reads no probe and keeps CONVERGE."""
+    keeps ADMM's non-negativity penalty; three points (point-like, a few lit voxels) narrow the stop to
+    CONVERGE·(n/FEW_POINTS)², with their count n in the attributes, and run to the cap (here 400) with the estimate
+    still above it; a tolerance the user gives is kept; a warm start from the first solve's state, whose weights it
+    carries, reads no probe and keeps CONVERGE."""
     points = np.zeros((8, 48, 64), np.float32)
     for band, y, x in ((1, 20, 20), (4, 30, 40), (6, 15, 45)):
         points[band, y, x] = 1.0
@@ -222,11 +228,14 @@ def test_a_solve_widens_its_stop_on_a_spread_scene_and_narrows_it_on_a_few_point
     assert wide.attrs["mean_over_peak"] >= Admm.point_like_below and wide.attrs["stop_tolerance"] == CONVERGE_WIDE
     assert wide.state.carry[0].penalties.nonneg / wide.state.carry[0].penalties.tv == pytest.approx(NONNEG / TV)
     assert wide.stop_reason == "converged" and wide.attrs["distance_estimate"] < CONVERGE_WIDE
-    narrow = reconstruct(point.measurement, point.calibration)
+    with monkeypatch.context() as patch:
+        patch.setattr(settings, "AUTO_CAP", 400)
+        narrow = reconstruct(point.measurement, point.calibration)
     few = narrow.attrs["lit_voxels"]
     assert narrow.attrs["mean_over_peak"] < Admm.point_like_below and 3 <= few < FEW_POINTS
     assert narrow.attrs["stop_tolerance"] == pytest.approx(CONVERGE * (few / FEW_POINTS) ** 2, rel=1e-12)
-    assert narrow.stop_reason == "converged" and narrow.attrs["distance_estimate"] < narrow.attrs["stop_tolerance"]
+    assert (narrow.stop_reason, narrow.iterations) == ("iterations", 400)
+    assert narrow.attrs["distance_estimate"] > narrow.attrs["stop_tolerance"]
     kept = reconstruct(spread.measurement, spread.calibration, converge=0.07)
     assert kept.attrs["stop_tolerance"] == 0.07 and kept.iterations > wide.iterations
     warm = Solver(spread.calibration).solve(spread.measurement, state=wide.state)       # weights carried: no probe

@@ -11,6 +11,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import admm_acceleration  # noqa: E402
 import bench_accuracy  # noqa: E402
 import bench_admm  # noqa: E402
+import bench_answer  # noqa: E402
 import bench_breakdown  # noqa: E402
 import bench_converged  # noqa: E402
 import bench_iteration  # noqa: E402
@@ -272,7 +273,7 @@ def test_panels_draw_the_simulators_point_scenes_with_kinds(tmp_path, capsys):
         own = simulate(plan["kind"], (24, 32), 4, plan["seed"] % 2 ** 31, **bench_panel.LEVELS[plan["level"]])
         assert sim.scene == plan["kind"] and np.array_equal(sim.truth, own.truth)
         assert np.array_equal(sim.measurement, own.measurement)
-    for tool in (bench_panel, bench_converged, bench_stop):
+    for tool in (bench_panel, bench_converged, bench_stop, bench_answer):
         with pytest.raises(SystemExit) as stop:
             tool.main(["--kinds", "points,dots", "--seed", "1", "--out", str(tmp_path / "out")])
         errors = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]
@@ -494,6 +495,43 @@ def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys
     assert bench_stop.settled(flags, ref)["iteration"] == 15
     assert bench_stop.stop(flags, "steps", 0.5) == {**flags[1], "stays_within": False}
     assert "| 0 | piecewise, standard |" in capsys.readouterr().out and (tmp_path / "stop.png").stat().st_size > 0
+
+
+def test_bench_answer_replays_the_default_stop_where_the_default_stops(tmp_path, capsys):
+    """On a two-scene panel (a few points, sixteen sources) at a size where the sources' default converges before
+    the trajectory's end: the replayed stop at the default's own tolerance ends where a default solve of the scene
+    ends; the answer is the last mark; a stop's shortfall is its mark's against the answer's, and "needs" is the
+    widest grid tolerance whose stop is within; the cap ends a stop whose estimate falls only after it; a trajectory
+    too short to read the drift is refused."""
+    args = ["--size", "32x40", "--bands", "8", "--scenes", "2", "--kinds", "points,sources", "--seed", "5",
+            "--iters", "1100", "--tolerances", "1e9", "--out", str(tmp_path)]
+    bench_answer.main(args)
+    results = json.loads((tmp_path / "answer.json").read_text())
+    for scene in results["scenes"]:
+        sim = bench_panel.panel_scene({k: scene[k] for k in ("kind", "level", "seed")}, (32, 40), 8)
+        own = Solver(sim.calibration).solve(sim.measurement)
+        marks, default = scene["marks"], scene["default"]
+        assert default["tolerance"] == own.attrs["stop_tolerance"]
+        assert default["converged"] == (own.iterations <= marks[-1]["iteration"])
+        if default["converged"]:
+            assert default["iteration"] == own.iterations and own.stop_reason == "converged"
+            assert default["short_db"] == pytest.approx(scene["answer"]["psnr"] - psnr(own.cube, sim.truth), abs=1e-9)
+        assert scene["answer"]["psnr"] == marks[-1]["psnr"] and marks[-1]["iteration"] == 1080   # the cap is past it
+        assert scene["stops"][0]["iteration"] == AUTO_AT + FIRST_READING
+        needs = scene["needs"]
+        assert needs["within"] and all(not bench_answer.stop(marks, scene["answer"], t)["within"]
+                                       for t in bench_answer.GRID if t > needs["tolerance"])
+    assert sum(s["default"]["converged"] for s in results["scenes"]) >= 1
+    late = [{"iteration": k, "psnr": 9.0, "angle": 1.0, "estimate": e}
+            for k, e in ((AUTO_CAP - 20, 0.5), (AUTO_CAP, 0.5), (AUTO_CAP + 5, 0.1))]
+    capped = bench_answer.stop(late, {"psnr": 9.0, "angle": 1.0}, 0.2)      # a reading past the cap is not read
+    assert (capped["iteration"], capped["converged"]) == (AUTO_CAP, False)
+    assert bench_answer.stop_cell(capped) == f"{AUTO_CAP} (cap): +0.00 dB / +0.00°"
+    assert "| 1 | sources, standard |" in capsys.readouterr().out and (tmp_path / "answer.png").stat().st_size > 0
+    with pytest.raises(SystemExit) as refused:
+        bench_answer.main([*args[:-5], "1000", "--out", str(tmp_path / "short")])
+    assert refused.value.code == 2 and "--iters 1000" in capsys.readouterr().err
+    assert not (tmp_path / "short").exists()
 
 
 def test_bench_admm_sweeps_the_relaxation_with_the_penalties(tmp_path, capsys):
@@ -771,7 +809,7 @@ def test_weight_rejudge_refuses_a_malformed_panel_before_solving(tmp_path, capsy
     assert refused.value.code == 2 and "error:" in errors[-1] and message in errors[-1]
 
 
-PANEL_TOOLS = (bench_panel, bench_converged, bench_stop)     # with --scenes: an index past the panel is refused too
+PANEL_TOOLS = (bench_panel, bench_converged, bench_stop, bench_answer)     # with --scenes: an index past the panel is refused too
 
 
 @pytest.mark.parametrize("tool, only", [(tool, only) for tool in (*PANEL_TOOLS, weight_oracles)

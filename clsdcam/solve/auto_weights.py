@@ -20,27 +20,28 @@ Below it, too, the algorithm is told, and whether the scene is one of a few poin
 (ADMM lightens its non-negativity penalty, and on a few points widens its TV thresholds).
 At or above it, the automatic stop may widen its tolerance (``wide_stop``, ``--converge auto``): the scenes the
 probe passes reach the model's answer, within the rules of docs/convergence.md, at a distance of 0.1 where the
-point-like ones need 0.05 ("The stop widened where the scene is not point-like"). On a point-like scene of a few
-points, with fewer than ``FEW_POINTS`` lit voxels by the same iterate's count n = sum(v)/max(v) (p times the window's
-voxels: a count that does not fall as the sensor grows, as p does), the tolerance narrows as
+point-like ones need 0.05 ("The stop widened where the scene is not point-like"). On a point-like scene of fewer
+than ``FEW_POINTS`` lit voxels by the same iterate's count n = sum(v)/max(v) (p times the window's voxels: a count
+that does not fall as the sensor grows, as p does), the tolerance narrows as
 
-    D = 0.05·(n / FEW_POINTS)²:
+    D = 0.05·(n / FEW_POINTS)²,
 
-so few unknowns are fixed so well by the measurement that a small distance is a large loss of PSNR, and at 0.05
-the simulator's two-point scenes stopped 0.3–5.3 dB short of their answer ("A stop for a few points"). With ten
-or so lit voxels D is under 0.001, and the solve may run to the cap. On small sensors, where a few points light
-enough of the frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no auto
-weight, or an algorithm without a threshold) the tolerance stays."""
+which meets 0.05 at FEW_POINTS: so few unknowns are fixed so well by the measurement that a small distance is a
+large loss of PSNR. At 0.05 the simulator's two-point scenes stopped 1.5–5.4 dB short of their answer, and they come
+within 0.2 dB of it only at 0.0011–0.027 of the estimate, unpredictably ("A narrower stop for a few lit voxels"). With
+fifty lit voxels D is 0.0005, and the solve may run to the cap. On small sensors, where a few points light enough of
+the frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no auto weight, or an
+algorithm without a threshold) the tolerance stays."""
 from __future__ import annotations
 
 from .noise import residual_noise
 
 AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
-# lit voxels (sum/peak) below which --converge auto narrows as their square, and ADMM's TV balance widens its
-# thresholds (Algorithm.point_like's few_points): the simulator's two-point scenes count
-# 33–98 (16–64 bands), its sixteen sources 160–210, the panels' narrow-line scenes 397 and up
-# (docs/convergence.md, "A stop for a few points")
-FEW_POINTS = 100
+# lit voxels (sum/peak) below which a point-like scene is one of a few points: ADMM's TV balance widens its
+# thresholds (Algorithm.point_like's few_points) and --converge auto narrows as (n / FEW_POINTS)². The simulator's
+# two-point scenes count 45–98 (24–64 bands), its sixteen sources 173–445 (32–48 bands), the last 20-scene panel's
+# narrow-line scenes 397–1592 (docs/convergence.md, "A narrower stop and wider thresholds for a few lit voxels")
+FEW_POINTS = 500
 
 
 def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool]:
@@ -50,6 +51,15 @@ def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool]:
     p = attrs.get("mean_over_peak")
     point_like = p is not None and p < point_like_below
     return point_like, point_like and attrs["lit_voxels"] < FEW_POINTS
+
+
+def auto_tolerance(converge: float, wide: float, point_like: bool, lit_voxels: float) -> float:
+    """``--converge auto``'s tolerance from the probe's reading (the module docstring): ``wide`` on a scene that is
+    not point-like; on a point-like one, converge·(n/FEW_POINTS)² below FEW_POINTS lit voxels, else
+    ``converge``."""
+    if not point_like:
+        return wide
+    return converge * min(1.0, lit_voxels / FEW_POINTS) ** 2
 
 
 class AutoWeights:
@@ -83,20 +93,21 @@ class AutoWeights:
         if point_like:
             driver.algorithm.point_like(few_points)
         if self.wide_stop and "mean_over_peak" in self.chosen:
-            self._tune_stop(driver, point_like, few_points)
+            self._tune_stop(driver, point_like)
 
-    def _tune_stop(self, driver, point_like: bool, few_points: bool) -> None:
+    def _tune_stop(self, driver, point_like: bool) -> None:
         """``--converge auto`` from the probe's reading (the module docstring): widened on a scene that is not
-        point-like, narrowed as n² on a scene of a few points; said in a note."""
+        point-like, narrowed as n² on a point-like one of fewer than FEW_POINTS lit voxels; said in a note."""
         p, n = self.chosen["mean_over_peak"], self.chosen["lit_voxels"]
+        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, n)
         if not point_like:
-            driver.widen_stop(self.wide_stop)
+            driver.widen_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "
                         f"{p:.2g} ≥ {self.point_like_below:g})")
-        elif few_points:
-            driver.narrow_stop(driver.rules.converge * (n / FEW_POINTS) ** 2)
-            driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a scene of a few points: {n:.3g} lit "
-                        f"voxels < {FEW_POINTS})")
+        elif n < FEW_POINTS:
+            driver.narrow_stop(tolerance)
+            driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a point-like scene of few lit voxels: "
+                        f"{n:.3g} < {FEW_POINTS})")
 
     def _measure_likeness(self, problem, x) -> None:
         """The iterate's window's p = mean/max, kept as the attribute ``mean_over_peak``, and n = p times the window's
