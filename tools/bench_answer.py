@@ -25,14 +25,12 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import numpy as np
 
 from bench_accuracy import Where, add_backend_option, panel_parser, report, size_text
 from bench_converged import curve, timed_solve, within
 from bench_panel import add_kinds_option, chosen_scenes, panel_scene, scene_done, scene_indices
-from bench_stop import replay
+from bench_stop import replay, save_grid, scene_grid
 from clsdcam.algorithms.admm.algorithm import POINT_LIKE_BELOW
-from clsdcam.render import new_figure
 from clsdcam.solve.auto_weights import AUTO_AT, auto_tolerance, probe_reading
 from clsdcam.solve.convergence import WINDOW
 from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE
@@ -78,6 +76,13 @@ def run_scene(plan: dict, args) -> dict:
             "marks": points}
 
 
+def run_and_say(index: int, plan: dict, args) -> dict:
+    """Scene ``index`` of the panel, run and scored; its progress line said."""
+    scene = {"index": index, **run_scene(plan, args)}
+    scene_done(index, plan, args.scenes)
+    return scene
+
+
 def stop_cell(found: dict | None) -> str:
     if found is None:
         return "none in the grid"
@@ -112,9 +117,7 @@ def markdown(results: dict) -> str:
 def plot(results: dict, path: Path, per_row: int = 4):
     """Every scene's PSNR short of its answer against iterations (log), the default's stop dashed."""
     scenes = results["scenes"]
-    columns, rows = min(len(scenes), per_row), -(-len(scenes) // per_row)
-    fig = new_figure(figsize=(3.2 * columns, 2.8 * rows))
-    axes = np.array(fig.subplots(rows, columns, squeeze=False)).ravel()
+    fig, axes = scene_grid(len(scenes), per_row)
     for ax, scene in zip(axes, scenes):
         marks = scene["marks"]
         short = [max(scene["answer"]["psnr"] - m["psnr"], 1e-3) for m in marks]
@@ -123,11 +126,8 @@ def plot(results: dict, path: Path, per_row: int = 4):
         ax.axvline(scene["default"]["iteration"], color="C3", ls="--")
         ax.set(title=f"{scene['index']}: {scene['kind']}, {scene['level']}", xlabel="iteration",
                ylabel="dB short of the answer")
-    for ax in axes[len(scenes):]:
-        ax.set_visible(False)
-    fig.suptitle(f"Seed {results['seed']}, {results['size']}×{results['bands']}: the default's trajectory against "
-                 "its answer (grey: 0.2 dB; dashed: where the default stops)", fontsize=10)
-    fig.savefig(path, dpi=90)
+    save_grid(fig, results, "the default's trajectory against its answer (grey: 0.2 dB; dashed: where the default "
+                            "stops)", path)
 
 
 def main(argv=None) -> int:
@@ -138,22 +138,18 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, required=True, help="the panel")
     parser.add_argument("--only", type=scene_indices, metavar="I[,J...]", help="these scenes of the panel alone")
     parser.add_argument("--iters", type=int, default=6000, help="the trajectory's iterations (default 6000)")
-    parser.add_argument("--tolerances", default="0.05,0.01,0.002", help="stop tolerances to replay beside the "
-                                                                        "default's")
+    parser.add_argument("--tolerances", type=lambda text: [float(t) for t in text.split(",")],
+                        default="0.05,0.01,0.002", help="stop tolerances to replay beside the default's")
     add_backend_option(parser)
     args = parser.parse_args(argv)
     if args.iters < AUTO_AT + WINDOW + SETTLED_OVER:
         parser.error(f"--iters {args.iters}: at least {AUTO_AT + WINDOW + SETTLED_OVER} to read the answer's drift")
     Where.use(args.backend)
-    args.tolerances = [float(t) for t in args.tolerances.split(",")]
     chosen = chosen_scenes(parser, args, args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {"seed": args.seed, "size": size_text(args.size), "bands": args.bands, "iters": args.iters,
-               "tolerances": args.tolerances, "scenes": []}
-    for i, plan in chosen:
-        results["scenes"].append({"index": i, **run_scene(plan, args)})
-        scene_done(i, plan, args.scenes)
+               "tolerances": args.tolerances, "scenes": [run_and_say(i, plan, args) for i, plan in chosen]}
     report(out, "answer", results, markdown(results))
     plot(results, out / "answer.png")
     return 0

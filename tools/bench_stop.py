@@ -128,12 +128,27 @@ def markdown(results: dict) -> str:
     return "\n".join(head + rows)
 
 
+def scene_grid(count: int, per_row: int):
+    """A figure of ``count`` panels of 3.2×2.8 inches, ``per_row`` to a row, and their axes (the grid's spare ones
+    hidden)."""
+    columns, rows = min(count, per_row), -(-count // per_row)
+    fig = new_figure(figsize=(3.2 * columns, 2.8 * rows))
+    axes = np.array(fig.subplots(rows, columns, squeeze=False)).ravel()
+    for ax in axes[count:]:
+        ax.set_visible(False)
+    return fig, axes[:count]
+
+
+def save_grid(fig, results: dict, what: str, path: Path):
+    """A :func:`scene_grid` figure titled with its panel (seed, size) and ``what`` it shows, saved to ``path``."""
+    fig.suptitle(f"Seed {results['seed']}, {results['size']}×{results['bands']}: {what}", fontsize=10)
+    fig.savefig(path, dpi=90)
+
+
 def plot(results: dict, path: Path, per_row: int = 5):
     """Every scene's true distance and both estimates against iterations (log), the settled mark dashed."""
     scenes = results["scenes"]
-    columns, rows = min(len(scenes), per_row), -(-len(scenes) // per_row)
-    fig = new_figure(figsize=(3.2 * columns, 2.8 * rows))
-    axes = np.array(fig.subplots(rows, columns, squeeze=False)).ravel()
+    fig, axes = scene_grid(len(scenes), per_row)
     for ax, scene in zip(axes, scenes):
         marks = scene["marks"]
         ax.semilogy([m["iteration"] for m in marks], [m["distance"] for m in marks], "k", label="true distance")
@@ -145,12 +160,8 @@ def plot(results: dict, path: Path, per_row: int = 5):
             ax.axvline(scene["settled"]["iteration"], color="0.5", ls="--", label="within the rules from")
         ax.set(title=f"{scene['index']}: {scene['kind']}, {scene['level']}", xlabel="iteration",
                ylabel="relative distance")
-    for ax in axes[len(scenes):]:
-        ax.set_visible(False)
     axes[0].legend(fontsize=7, framealpha=0.5)
-    fig.suptitle(f"Seed {results['seed']}, {results['size']}×{results['bands']}: the stop's estimates against the "
-                 "true distance to the reference", fontsize=10)
-    fig.savefig(path, dpi=90)
+    save_grid(fig, results, "the stop's estimates against the true distance to the reference", path)
 
 
 def main(argv=None) -> int:

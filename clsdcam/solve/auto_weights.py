@@ -16,8 +16,9 @@ blurrier. Below it, a rule with a ``point_noise`` lightens the weight in good li
 (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`). A warm start from a cube (``x0``) reads its own iterate there;
 a dark iterate counts as p = 1.
 
-Below it, too, the algorithm is told, and whether the scene is one of a few points (below): ``Algorithm.point_like``
-(ADMM lightens its non-negativity penalty, and on a few points widens its TV thresholds).
+Below it, too, the algorithm is told, and whether the scene is one of a few points, fewer than ``FEW_POINTS`` lit
+voxels (below): ``Algorithm.point_like`` (ADMM lightens its non-negativity penalty, and on a few points widens its TV
+thresholds).
 At or above it, the automatic stop may widen its tolerance (``wide_stop``, ``--converge auto``): the scenes the
 probe passes reach the model's answer, within the rules of docs/convergence.md, at a distance of 0.1 where the
 point-like ones need 0.05 ("The stop widened where the scene is not point-like"). On a point-like scene of fewer
@@ -27,9 +28,10 @@ that does not fall as the sensor grows, as p does), the tolerance narrows as
     D = 0.05·(n / FEW_POINTS)²,
 
 which meets 0.05 at FEW_POINTS: so few unknowns are fixed so well by the measurement that a small distance is a
-large loss of PSNR. At 0.05 the simulator's two-point scenes stopped 1.5–5.4 dB short of their answer, and they come
-within 0.2 dB of it only at 0.0011–0.027 of the estimate, unpredictably ("A narrower stop for a few lit voxels"). With
-fifty lit voxels D is 0.0005, and the solve may run to the cap. On small sensors, where a few points light enough of
+large loss of PSNR. Under the earlier 0.05·(n/100)² the simulator's two-point scenes stopped 0.35–1.65 dB short of
+the answer their own run converges to on five of six, and they come within 0.2 dB of it at tolerances from 0.0011 to
+0.027, unpredictably ("A narrower stop and wider thresholds for a few lit voxels"). With fifty lit voxels D is
+0.0005, and the solve may run to the cap. On small sensors, where a few points light enough of
 the frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no auto weight, or an
 algorithm without a threshold) the tolerance stays."""
 from __future__ import annotations
