@@ -28,6 +28,7 @@ from clsdcam.metrics import psnr, spectral_angle  # noqa: E402
 from clsdcam.solve.auto_weights import AUTO_AT  # noqa: E402
 from clsdcam.solve.convergence import FIRST_READING, WINDOW  # noqa: E402
 from clsdcam.algorithms.admm import Admm  # noqa: E402
+from clsdcam.solve import settings  # noqa: E402
 from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE  # noqa: E402
 from clsdcam.solve.solver import Settings, Solver  # noqa: E402
 
@@ -497,36 +498,37 @@ def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys
     assert "| 0 | piecewise, standard |" in capsys.readouterr().out and (tmp_path / "stop.png").stat().st_size > 0
 
 
-def test_bench_answer_replays_the_default_stop_where_the_default_stops(tmp_path, capsys):
-    """On a two-scene panel (a few points, sixteen sources) at a size where the sources' default converges before
-    the trajectory's end: the replayed stop at the default's own tolerance ends where a default solve of the scene
-    ends; the answer is the last mark; a stop's shortfall is its mark's against the answer's, and "needs" is the
-    widest grid tolerance whose stop is within; the cap ends a stop whose estimate falls only after it; a trajectory
-    too short to read the drift is refused."""
+def test_bench_answer_replays_the_default_stop_where_the_default_stops(tmp_path, capsys, monkeypatch):
+    """On a two-scene panel at 32×40×8, with the cap at 1080 (a window's end): a two-point scene, point-like with a
+    few lit voxels, whose narrowed stop runs to the cap, and a sixteen-source scene, not point-like at this size,
+    whose widened stop converges before it. On each the replayed stop at the default's own tolerance ends where a
+    default solve of the scene ends, with its cube's PSNR; the answer is the last mark; "needs" is the widest grid
+    tolerance whose stop is within; the cap ends a stop whose estimate falls only after it; a trajectory too short
+    to read the drift is refused."""
+    for module in (settings, bench_answer):
+        monkeypatch.setattr(module, "AUTO_CAP", 1080)
     args = ["--size", "32x40", "--bands", "8", "--scenes", "2", "--kinds", "points,sources", "--seed", "5",
             "--iters", "1100", "--tolerances", "1e9", "--out", str(tmp_path)]
     bench_answer.main(args)
     results = json.loads((tmp_path / "answer.json").read_text())
+    assert [(s["point_like"], s["default"]["converged"]) for s in results["scenes"]] == [(True, False), (False, True)]
     for scene in results["scenes"]:
         sim = bench_panel.panel_scene({k: scene[k] for k in ("kind", "level", "seed")}, (32, 40), 8)
         own = Solver(sim.calibration).solve(sim.measurement)
         marks, default = scene["marks"], scene["default"]
         assert default["tolerance"] == own.attrs["stop_tolerance"]
-        assert default["converged"] == (own.iterations <= marks[-1]["iteration"])
-        if default["converged"]:
-            assert default["iteration"] == own.iterations and own.stop_reason == "converged"
-            assert default["short_db"] == pytest.approx(scene["answer"]["psnr"] - psnr(own.cube, sim.truth), abs=1e-9)
-        assert scene["answer"]["psnr"] == marks[-1]["psnr"] and marks[-1]["iteration"] == 1080   # the cap is past it
+        assert (default["iteration"], default["converged"]) == (own.iterations, own.stop_reason == "converged")
+        assert default["short_db"] == pytest.approx(scene["answer"]["psnr"] - psnr(own.cube, sim.truth), abs=1e-9)
+        assert scene["answer"]["psnr"] == marks[-1]["psnr"] and marks[-1]["iteration"] == 1080
         assert scene["stops"][0]["iteration"] == AUTO_AT + FIRST_READING
         needs = scene["needs"]
         assert needs["within"] and all(not bench_answer.stop(marks, scene["answer"], t)["within"]
                                        for t in bench_answer.GRID if t > needs["tolerance"])
     assert sum(s["default"]["converged"] for s in results["scenes"]) >= 1
-    late = [{"iteration": k, "psnr": 9.0, "angle": 1.0, "estimate": e}
-            for k, e in ((AUTO_CAP - 20, 0.5), (AUTO_CAP, 0.5), (AUTO_CAP + 5, 0.1))]
+    late = [{"iteration": k, "psnr": 9.0, "angle": 1.0, "estimate": e} for k, e in ((1060, 0.5), (1080, 0.5), (1085, 0.1))]
     capped = bench_answer.stop(late, {"psnr": 9.0, "angle": 1.0}, 0.2)      # a reading past the cap is not read
-    assert (capped["iteration"], capped["converged"]) == (AUTO_CAP, False)
-    assert bench_answer.stop_cell(capped) == f"{AUTO_CAP} (cap): +0.00 dB / +0.00°"
+    assert (capped["iteration"], capped["converged"]) == (1080, False)
+    assert bench_answer.stop_cell(capped) == "1080 (cap): +0.00 dB / +0.00°"
     assert "| 1 | sources, standard |" in capsys.readouterr().out and (tmp_path / "answer.png").stat().st_size > 0
     with pytest.raises(SystemExit) as refused:
         bench_answer.main([*args[:-5], "1000", "--out", str(tmp_path / "short")])
