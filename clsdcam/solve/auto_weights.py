@@ -31,9 +31,9 @@ which meets 0.05 at FEW_POINTS: so few unknowns are fixed so well by the measure
 large loss of PSNR. Under the earlier 0.05·(n/100)² the simulator's two-point scenes stopped 0.35–1.65 dB short of
 the answer their own run converges to on five of six, and they come within 0.2 dB of it at tolerances from 0.0011 to
 0.027, unpredictably ("A narrower stop and wider thresholds for a few lit voxels"). With fifty lit voxels D is
-0.0005, and the solve may run to the cap. On small sensors, where a few points light enough of
-the frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no auto weight, or an
-algorithm without a threshold) the tolerance stays."""
+0.0005, and the solve may run to the cap. On small sensors, where a few points light enough of the frame for p to
+pass the threshold, the stop widens as before. Where the probe does not run (no auto weight, or an algorithm without
+a threshold) the tolerance stays."""
 from __future__ import annotations
 
 from .noise import residual_noise
@@ -95,18 +95,18 @@ class AutoWeights:
         if point_like:
             driver.algorithm.point_like(few_points)
         if self.wide_stop and "mean_over_peak" in self.chosen:
-            self._tune_stop(driver, point_like)
+            self._tune_stop(driver, point_like, few_points)
 
-    def _tune_stop(self, driver, point_like: bool) -> None:
-        """``--converge auto`` from the probe's reading (the module docstring): widened on a scene that is not
-        point-like, narrowed as n² on a point-like one of fewer than FEW_POINTS lit voxels; said in a note."""
+    def _tune_stop(self, driver, point_like: bool, few_points: bool) -> None:
+        """``--converge auto`` from the probe's reading (:func:`probe_reading`, the module docstring): widened on a
+        scene that is not point-like, narrowed as n² on a scene of a few points; said in a note."""
         p, n = self.chosen["mean_over_peak"], self.chosen["lit_voxels"]
         tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, n)
         if not point_like:
             driver.widen_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "
                         f"{p:.2g} ≥ {self.point_like_below:g})")
-        elif n < FEW_POINTS:
+        elif few_points:
             driver.narrow_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a point-like scene of few lit voxels: "
                         f"{n:.3g} < {FEW_POINTS})")
