@@ -2,6 +2,8 @@
 sub-problem on a tiny case (in one block and in row blocks), the differences' adjoints, convergence to the problem's
 minimiser (FISTA's, where both are exact), and the solve around it (driver, checkpoints, Ctrl-C, warm starts, what it
 refuses)."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -222,6 +224,22 @@ def test_a_videos_next_frame_resumes_the_splits_and_duals(leds):
     assert state.carry is None and again.history[0]["data"] > 1.2 * first.history[-1]["data"]
 
 
+def test_a_frame_whose_field_moved_starts_its_duals_afresh_in_the_last_frames_penalties(leds):
+    """What a moved field keeps of ADMM's carry (``SplitState.moved``) is its penalties: the next solve starts its
+    duals afresh (its first data term well above the last one's, as from a cube) in those penalties, balanced and in
+    the probe's reading, and sets them neither anew nor again at the balance's mark; without them it would."""
+    solver = Solver(leds.calibration, settings=Settings(iters=admm.algorithm.BALANCE_AT + 5, algorithm="admm"))
+    first = solver.solve(leds.measurement)
+    carried = first.state.carry[0].penalties
+    assert carried.tv_balance is not None and first.state.carry[0].moved() is carried
+    moved = dataclasses.replace(first.state, carry=(carried, first.state.carry[1]))
+    resumed = solver.solve(leds.measurement, state=moved, iters=admm.algorithm.BALANCE_AT + 2)
+    assert resumed.state.carry[0].penalties == carried
+    assert resumed.history[0]["data"] > 1.2 * first.history[-1]["data"]
+    fresh = solver.solve(leds.measurement, state=dataclasses.replace(first.state, carry=None), iters=admm.algorithm.BALANCE_AT + 2)
+    assert fresh.state.carry[0].penalties != carried
+
+
 @pytest.mark.parametrize("few_points", [False, True])
 def test_the_balance_sets_each_axis_threshold_from_the_iterates_differences_and_keeps_the_unscaled_duals(tiny,
                                                                                                        few_points):
@@ -287,13 +305,21 @@ def test_a_new_nonneg_penalty_leaves_the_fixed_point_where_it_is(tiny):
 
 
 def test_the_balance_holds_each_axis_within_its_range_and_leaves_a_flat_axis(tiny):
-    """A cube flat along λ keeps β_λ; the other axes' β_d are held within [1/BALANCE_RANGE, BALANCE_RANGE]."""
+    """A cube flat along λ keeps β_λ; the other axes' β_d are held within [1/BALANCE_RANGE, BALANCE_RANGE], or on a
+    scene of a few points within [FLOOR_FEW_POINTS, BALANCE_RANGE], the floor the balance then takes."""
     model, split = tiny
     w = np.broadcast_to(RNG.random(split.shape[1:]), split.shape).copy()
     betas = balance.balanced_penalties(split, balance.difference_rms(split, w), balance.THRESHOLD_OVER_RMS).tv_balance
     assert betas[0] == split.penalties.tv_balance[0]
     tiny_rms = balance.balanced_penalties(split, {1: 1e-12, 2: 1e12}, balance.THRESHOLD_OVER_RMS).tv_balance
     assert tiny_rms[1:] == (balance.BALANCE_RANGE, 1.0 / balance.BALANCE_RANGE)
+    few = balance.balanced_penalties(split, {1: 1e-12, 2: 1e12}, balance.THRESHOLD_FEW_POINTS,
+                                     balance.FLOOR_FEW_POINTS).tv_balance
+    assert few[1:] == (balance.BALANCE_RANGE, balance.FLOOR_FEW_POINTS) and balance.FLOOR_FEW_POINTS < tiny_rms[2]
+    state = random_state(split)
+    state.w *= 1e6                     # differences far above the weight: every axis at its floor
+    floors = [balance.balance(split, random_state(split), state.w, few).tv_balance for few in (False, True)]
+    assert floors == [(1.0 / balance.BALANCE_RANGE,) * 3, (balance.FLOOR_FEW_POINTS,) * 3]
 
 
 def test_admm_balances_once_at_its_mark_and_a_resumed_frame_keeps_the_penalties(leds, monkeypatch):

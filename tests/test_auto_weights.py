@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from clsdcam.algorithms.admm import Admm, balance
-from clsdcam.algorithms.admm.algorithm import NONNEG, NONNEG_POINT_LIKE, TV
-from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS, AutoWeights
+from clsdcam.algorithms.admm.algorithm import NONNEG, NONNEG_FEW_POINTS, TV
+from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS, FEW_POINTS_STOP, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.sim import simulate
@@ -145,7 +145,7 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monk
     assert admm.attrs["tv_chosen"] == pytest.approx(rule.for_noise(noise, True))
     assert rule.for_noise(noise, True) < 0.5 * rule.for_noise(noise)
     penalties = admm.state.carry[0].penalties          # μ₂ and μ₃ share their scale (penalties_for)
-    assert penalties.nonneg / penalties.tv == pytest.approx(NONNEG_POINT_LIKE / TV, rel=1e-12)
+    assert penalties.nonneg / penalties.tv == pytest.approx(NONNEG_FEW_POINTS / TV, rel=1e-12)   # a few points
     told, real = [], balance.balance
     monkeypatch.setattr(balance, "balance", lambda *a: told.append(a[3]) or real(*a))
     reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT + 1, algorithm="admm")
@@ -166,16 +166,15 @@ MANY = (16, 128, 128)     # FEW_POINTS lit voxels of these are point-like (p = 5
 
 @pytest.mark.parametrize("cube, tolerance, said, few_points", [
     (lit_voxels(FEW_POINTS, MANY), CONVERGE, None, False),     # point-like, not a few points: CONVERGE
-    (lit_voxels(FEW_POINTS - 1, MANY), CONVERGE * (499 / FEW_POINTS) ** 2, "few lit voxels: 499 < 500", True),
-    (lit_voxels(120), CONVERGE * (120 / FEW_POINTS) ** 2, "a point-like scene of few lit voxels: 120 < 500", True),
-    (one_lit_pixel(), CONVERGE * (1 / FEW_POINTS) ** 2, "few lit voxels: 1 < 500", True),
+    (lit_voxels(FEW_POINTS - 1, MANY), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 499 < 500", True),
+    (lit_voxels(120), CONVERGE * FEW_POINTS_STOP, "a point-like scene of few lit voxels: 120 < 500", True),
+    (one_lit_pixel(), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 1 < 500", True),
     (np.full((4, 32, 32), 0.5), CONVERGE_WIDE, "not a point-like scene", None),
     (np.zeros((4, 32, 32)), CONVERGE_WIDE, "not a point-like scene", None),   # a dark iterate counts as p = 1
 ])
-def test_the_stop_widens_on_a_spread_scene_and_narrows_as_the_square_of_a_few_points(cube, tolerance, said,
-                                                                                     few_points):
+def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tolerance, said, few_points):
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
-    point-like threshold, CONVERGE below it, CONVERGE·(n/FEW_POINTS)² below FEW_POINTS; a note says so where it
+    point-like threshold, CONVERGE below it, CONVERGE·FEW_POINTS_STOP below FEW_POINTS; a note says so where it
     moved. The algorithm hears whether a point-like scene is one of a few points, fewer than FEW_POINTS (None: not
     told)."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
@@ -216,7 +215,7 @@ def test_a_converge_that_is_neither_auto_nor_positive_is_refused(converge):
 def test_a_solve_widens_its_stop_on_a_spread_scene_and_narrows_it_on_a_few_points(monkeypatch):
     """Through the solver, --iters auto: a piecewise scene stops at CONVERGE_WIDE and says so in its attributes, and
     keeps ADMM's non-negativity penalty; three points (point-like, a few lit voxels) narrow the stop to
-    CONVERGE·(n/FEW_POINTS)², with their count n in the attributes, and run to the cap (here 400) with the estimate
+    CONVERGE·FEW_POINTS_STOP, with their count n in the attributes, and run to the cap (here 400) with the estimate
     still above it; a tolerance the user gives is kept; a warm start from the first solve's state, whose weights it
     carries, reads no probe and keeps CONVERGE."""
     points = np.zeros((8, 48, 64), np.float32)
@@ -233,7 +232,7 @@ def test_a_solve_widens_its_stop_on_a_spread_scene_and_narrows_it_on_a_few_point
         narrow = reconstruct(point.measurement, point.calibration)
     few = narrow.attrs["lit_voxels"]
     assert narrow.attrs["mean_over_peak"] < Admm.point_like_below and 3 <= few < FEW_POINTS
-    assert narrow.attrs["stop_tolerance"] == pytest.approx(CONVERGE * (few / FEW_POINTS) ** 2, rel=1e-12)
+    assert narrow.attrs["stop_tolerance"] == pytest.approx(CONVERGE * FEW_POINTS_STOP, rel=1e-12)
     assert (narrow.stop_reason, narrow.iterations) == ("iterations", 400)
     assert narrow.attrs["distance_estimate"] > narrow.attrs["stop_tolerance"]
     kept = reconstruct(spread.measurement, spread.calibration, converge=0.07)

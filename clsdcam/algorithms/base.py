@@ -91,12 +91,14 @@ class Algorithm:
 
     def carry(self):
         """What a video's next frame resumes from besides its iterate (:class:`clsdcam.solve.state.SolverState`), or
-        None: an algorithm with more state than its iterates (ADMM's splits and duals) returns it."""
+        None: an algorithm with more state than its iterates (ADMM's splits and duals) returns it. Its ``moved()``
+        is what a frame whose field moved resumes from instead (:func:`clsdcam.batch.motion.predict_state`), or
+        None."""
         return None
 
     def resume(self, carried, factor: float) -> None:
-        """Take over ``carried`` (a previous solve's :meth:`carry`), every array times ``factor`` (its units to this
-        solve's), before the first iteration. Nothing to take over by default."""
+        """Take over ``carried`` (a previous solve's :meth:`carry`, or what its ``moved()`` kept), every array times
+        ``factor`` (its units to this solve's), before the first iteration. Nothing to take over by default."""
 
 
 def place(backend, previous: Sequence, sources: Sequence) -> list:

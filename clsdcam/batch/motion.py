@@ -64,13 +64,15 @@ def predict(before, previous, min_shift: float = MIN_SHIFT):
 
 def predict_state(before, previous, state, backend, min_shift: float = MIN_SHIFT):
     """A solver state (:class:`clsdcam.solve.state.SolverState`) for frame i: frame i−1's, its whole field moved by
-    the drift between the cubes x̂_{i−2} (``before``) and x̂_{i−1} (``previous``), without the algorithm's carry
-    (ADMM's duals belong to the unmoved field); as it is when the drift is unknown or under ``min_shift`` px."""
+    the drift between the cubes x̂_{i−2} (``before``) and x̂_{i−1} (``previous``), the algorithm's carry reduced to
+    what survives the move (its ``moved()``: ADMM's penalties, not its duals, which belong to the unmoved field);
+    as it is when the drift is unknown or under ``min_shift`` px."""
     d = significant_drift(before, previous, min_shift)
     if d is None:
         return state
+    kept = None if state.carry is None else state.carry[0].moved()
     return replace(state, field=backend.to_device(moved_field(backend.to_host(state.field), state.basis, d)),
-                   carry=None)
+                   carry=None if kept is None else (kept, state.carry[1]))
 
 
 def moved_field(field: np.ndarray, basis: np.ndarray | None, d: tuple[float, float]) -> np.ndarray:

@@ -7,7 +7,7 @@ no band-space warm-up, the rank kept), starts with the step it ended with (back-
 weights it chose (an ``auto`` weight is not estimated again). Momentum starts afresh: the objective is a new one.
 An algorithm with more state than its iterate (ADMM's splits and duals) leaves it in ``carry`` and resumes from it
 (``algorithm.resume``), scaled to the new measurement's units and handed over once (no copy of its arrays); a
-field moved by the drift drops it (:func:`clsdcam.batch.motion.predict_state`). A cold start (zero, or a user's warm-start cube) is a :class:`Start`
+field moved by the drift keeps only what its ``moved()`` keeps (ADMM's penalties: :func:`clsdcam.batch.motion.predict_state`). A cold start (zero, or a user's warm-start cube) is a :class:`Start`
 too, with no basis, weights, references or carry.
 """
 from __future__ import annotations

@@ -10,8 +10,8 @@ scales (so a brighter scene, another PSF normalisation or filter gain needs no n
 μ₂ = ``TV``·μ₁·max|Ĥ|², μ₃ = ``NONNEG``·μ₁·max|Ĥ|² (:func:`penalties_for`; how they were chosen, and why residual
 balancing is not used: docs/admm.md). After ``BALANCE_AT`` iterations the TV split's is set along each axis from the
 iterate's differences, once (:mod:`.balance`); where the auto weights' probe finds the scene point-like (at the same
-iteration), the non-negativity split's drops to ``NONNEG_POINT_LIKE``, and on a scene of a few points the balance
-widens its thresholds (:meth:`Admm.point_like`).
+iteration), the non-negativity split's drops to ``NONNEG_POINT_LIKE``, and on a scene of a few points to
+``NONNEG_FEW_POINTS`` while the balance widens its thresholds (:meth:`Admm.point_like`).
 
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
@@ -39,6 +39,10 @@ RELAXATION = 1.7
 # μ₃'s constant on a point-like scene, from the probe's iteration on: the narrow-line scenes reach the model's answer
 # in half the iterations or less (docs/convergence.md, "A lighter non-negativity penalty for point-like scenes")
 NONNEG_POINT_LIKE = 3e-3
+# and on a scene of a few points (the probe's count, clsdcam.solve.auto_weights.FEW_POINTS): lighter still, the
+# sixteen-source scenes reach their answer in about half the iterations (docs/convergence.md, "Lighter penalties for a
+# few points")
+NONNEG_FEW_POINTS = 1e-3
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
 # mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64
 # panels' lines scenes, 0.0035–0.21 on their other 80 (docs/convergence.md, "A lighter weight for point-like scenes")
@@ -108,11 +112,16 @@ class Admm(Algorithm):
         return {"data": data, "change": ratio(step, norm)}
 
     def _build(self, problem) -> None:
-        """The steps for ``problem``, and the state: a resumed one (with the penalties its duals are in) or a start
-        from the iterate."""
+        """The steps for ``problem``, and the state: a resumed one (with the penalties its duals are in), or a start
+        from the iterate with fresh duals, in resumed penalties alone (a moved field's) or in the problem's own."""
+        from .terms import Penalties
+
         self.splitting = band_steps(problem)
         resumed, self._resumed = self._resumed, None
-        if resumed is not None and resumed.v.shape == self.splitting.shape:
+        if isinstance(resumed, Penalties):
+            self.splitting.set_penalties(resumed)
+            self.reset(self.x)
+        elif resumed is not None and resumed.v.shape == self.splitting.shape:
             self.splitting.set_penalties(resumed.penalties)
             self.state = resumed
         else:
@@ -137,13 +146,15 @@ class Admm(Algorithm):
 
     def point_like(self, few_points: bool = False) -> None:
         """The scene is point-like (the auto weights' probe, :mod:`clsdcam.solve.auto_weights`): μ₃ from ``NONNEG`` to
-        ``NONNEG_POINT_LIKE`` of the same scale, the solve going on from the same point (:func:`.balance.repenalise`);
-        on a scene of ``few_points`` the TV balance still to come sets wider thresholds (:mod:`.balance`)."""
+        ``NONNEG_POINT_LIKE`` of the same scale, or ``NONNEG_FEW_POINTS`` on a scene of ``few_points``, the solve going
+        on from the same point (:func:`.balance.repenalise`); on a scene of a few points the TV balance still to come
+        sets wider thresholds, and may set lower penalties (:mod:`.balance`)."""
         self._few_points = few_points
         if self.state is not None:
             from .balance import repenalise
 
-            repenalise(self.splitting, self.state, self.backend, NONNEG_POINT_LIKE / NONNEG)
+            constant = NONNEG_FEW_POINTS if few_points else NONNEG_POINT_LIKE
+            repenalise(self.splitting, self.state, self.backend, constant / NONNEG)
 
     def carry(self):
         """What the next frame's solve resumes from: the splits and duals (None before the first iteration)."""
@@ -151,7 +162,12 @@ class Admm(Algorithm):
 
     def resume(self, state, factor: float) -> None:
         """Go on from a previous solve's splits and duals (:meth:`carry`), every array times ``factor`` (its units to
-        this solve's: the problem is homogeneous in b), instead of starting the duals afresh."""
-        for array in state.arrays():
-            self.backend.scale(factor, array, out=array)
+        this solve's: the problem is homogeneous in b), instead of starting the duals afresh; or, given its penalties
+        alone (what a moved field keeps: ``SplitState.moved``), start the duals afresh in them (balanced once and in
+        the probe's reading, they are not set again)."""
+        from .terms import Penalties
+
+        if not isinstance(state, Penalties):
+            for array in state.arrays():
+                self.backend.scale(factor, array, out=array)
         self._resumed = state

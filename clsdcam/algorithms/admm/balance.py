@@ -12,7 +12,9 @@ differences along it:
 held within a factor ``BALANCE_RANGE`` of the camera's μ₂ (a flat or black cube's RMS says nothing). On a scene of a
 few points (the probe's count, :mod:`clsdcam.solve.auto_weights`) C is ``THRESHOLD_FEW_POINTS``: the RMS over a black
 cube is set by how few voxels are lit, far below the points' own edges, and C = 2 there left ADMM hundreds to
-thousands of iterations slower (docs/convergence.md, "Wider TV thresholds for a few points"). The unscaled
+thousands of iterations slower (docs/convergence.md, "Wider TV thresholds for a few points"); and β_d may fall to
+``FLOOR_FEW_POINTS`` there, where the floor 1/``BALANCE_RANGE`` held the sixteen-source scenes' penalties up to 4
+times above what C asks ("Lighter penalties for a few points"). The unscaled
 duals μ₂,d·η_d are kept (η_d ← r_d·η_d, s_d ← s_d + (1 − r_d)η_d with r_d = μ₂,d/μ₂,d', so u_d = s_d + η_d stays):
 the iteration goes on from the same point, with one new divisor. The RMS is read on the host (one download of w,
 once per solve), so both backends set the same penalties.
@@ -35,6 +37,10 @@ THRESHOLD_OVER_RMS = 2.0      # C: chosen on the tuning panel (docs/convergence.
 # a black cube is far below the points' own edges (docs/convergence.md, "Wider TV thresholds for a few points")
 THRESHOLD_FEW_POINTS = 16.0
 BALANCE_RANGE = 64.0          # β_d within [1/64, 64]
+# the floor of β_d on a scene of a few points: with C = 16 the sixteen-source scenes ask 1/130–1/260 of the camera's
+# penalty, and held at 1/64 they reach their answer hundreds of iterations later (docs/convergence.md, "Lighter
+# penalties for a few points")
+FLOOR_FEW_POINTS = 1.0 / 4096
 
 
 def difference_rms(split: SplittingBase, w: np.ndarray) -> dict[int, float]:
@@ -44,25 +50,28 @@ def difference_rms(split: SplittingBase, w: np.ndarray) -> dict[int, float]:
             for axis in split.axes}
 
 
-def balanced_penalties(split: SplittingBase, rms: dict[int, float], threshold_over_rms: float) -> Penalties:
-    """The penalties with each active axis's β_d = τw_d/(C·rms_d·μ₂), C = ``threshold_over_rms`` (the module
-    docstring); an axis whose differences are all zero, or the whole TV when its weight is zero, keeps its β_d."""
+def balanced_penalties(split: SplittingBase, rms: dict[int, float], threshold_over_rms: float,
+                       floor: float = 1.0 / BALANCE_RANGE) -> Penalties:
+    """The penalties with each active axis's β_d = τw_d/(C·rms_d·μ₂), C = ``threshold_over_rms``, held within
+    [``floor``, BALANCE_RANGE] (the module docstring); an axis whose differences are all zero, or the whole TV when its
+    weight is zero, keeps its β_d."""
     p, tau = split.penalties, split.tv.weight
     betas = [1.0, 1.0, 1.0] if p.tv_balance is None else list(p.tv_balance)
     for axis, value in rms.items():
         if value > 0 and tau > 0:
             beta = tau * split.tv.axis_weights[axis] / (threshold_over_rms * value * p.tv)
-            betas[axis] = float(np.clip(beta, 1.0 / BALANCE_RANGE, BALANCE_RANGE))
+            betas[axis] = float(np.clip(beta, floor, BALANCE_RANGE))
     return replace(p, tv_balance=tuple(betas))
 
 
 def balance(split: SplittingBase, state: SplitState, w_host: np.ndarray, few_points: bool = False) -> Penalties:
-    """Set the balanced penalties from the iterate ``w_host`` (w on the host), C the ``few_points`` one on a scene
-    of a few points, the TV duals rescaled to keep the unscaled ones; the state records them (a video's next frame
-    resumes with them). Returns them."""
+    """Set the balanced penalties from the iterate ``w_host`` (w on the host), C and the floor the ``few_points``
+    ones on a scene of a few points, the TV duals rescaled to keep the unscaled ones; the state records them (a
+    video's next frame resumes with them). Returns them."""
     old = split.penalties
-    threshold = THRESHOLD_FEW_POINTS if few_points else THRESHOLD_OVER_RMS
-    new = balanced_penalties(split, difference_rms(split, w_host), threshold)
+    threshold, floor = ((THRESHOLD_FEW_POINTS, FLOOR_FEW_POINTS) if few_points
+                        else (THRESHOLD_OVER_RMS, 1.0 / BALANCE_RANGE))
+    new = balanced_penalties(split, difference_rms(split, w_host), threshold, floor)
     split.rescale_tv_duals(state, {axis: old.tv_along(axis) / new.tv_along(axis) for axis in split.axes})
     split.set_penalties(new)
     state.penalties = new

@@ -49,6 +49,12 @@ class SplitState:
         """Every array of the state but the spectra (what a resumed solve scales into its units)."""
         return [getattr(self, f.name) for f in fields(self) if f.name not in ("spectra", "penalties")]
 
+    def moved(self) -> Penalties | None:
+        """What of the state a frame whose field was moved under it resumes from (a drifting video's,
+        :func:`clsdcam.batch.motion.predict_state`): the penalties, balanced and told the probe's reading, and not the
+        splits and duals, which belong to the unmoved field."""
+        return self.penalties
+
 
 def band_eigenvalues(n_bands: int) -> np.ndarray:
     """Λ_j = 2 − 2cos(πj/K): the eigenvalues of DᵀD for the first differences along λ (last one 0), whose
