@@ -166,8 +166,7 @@ MANY = (16, 128, 128)     # FEW_POINTS lit voxels of these are point-like (p = 5
 
 @pytest.mark.parametrize("cube, tolerance, said, few_points", [
     (lit_voxels(FEW_POINTS, MANY), CONVERGE, None, False),     # point-like, not a few points: CONVERGE
-    (lit_voxels(FEW_POINTS - 1, MANY), CONVERGE * (499 / FEW_POINTS) ** 2, "few lit voxels: 499 < 500", True),
-    (lit_voxels(300, MANY), CONVERGE * (300 / FEW_POINTS) ** 2, "few lit voxels: 300 < 500", True),
+    (lit_voxels(FEW_POINTS - 1, MANY), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 499 < 500", True),
     (lit_voxels(120), CONVERGE * FEW_POINTS_STOP, "a point-like scene of few lit voxels: 120 < 500", True),
     (one_lit_pixel(), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 1 < 500", True),
     (np.full((4, 32, 32), 0.5), CONVERGE_WIDE, "not a point-like scene", None),
@@ -175,8 +174,7 @@ MANY = (16, 128, 128)     # FEW_POINTS lit voxels of these are point-like (p = 5
 ])
 def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tolerance, said, few_points):
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
-    point-like threshold, CONVERGE below it, CONVERGE·max(FEW_POINTS_STOP, (n/FEW_POINTS)²) below FEW_POINTS (the
-    square from 224 lit voxels up, the floor below); a note says so where it
+    point-like threshold, CONVERGE below it, CONVERGE·FEW_POINTS_STOP below FEW_POINTS; a note says so where it
     moved. The algorithm hears whether a point-like scene is one of a few points, fewer than FEW_POINTS (None: not
     told)."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)

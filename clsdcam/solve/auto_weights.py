@@ -25,15 +25,13 @@ point-like ones need 0.05 ("The stop widened where the scene is not point-like")
 than ``FEW_POINTS`` lit voxels by the same iterate's count n = sum(v)/max(v) (p times the window's voxels: a count
 that does not fall as the sensor grows, as p does), the tolerance narrows to
 
-    D = 0.05·max(FEW_POINTS_STOP, (n / FEW_POINTS)²),   FEW_POINTS_STOP = 0.2 (D ≥ 0.01),
+    D = ``FEW_POINTS_STOP``·0.05 = 0.01:
 
-which meets 0.05 at FEW_POINTS: so few unknowns are fixed so well by the measurement that a small distance is a
-large loss of PSNR. With ADMM's penalties for a few points (:meth:`clsdcam.algorithms.admm.algorithm.Admm.point_like`)
-the simulator's two-point and sixteen-source scenes come within 0.2 dB and 0.5° of the answer their own run
-converges to at tolerances of 0.023–0.05 whatever their count ("Lighter penalties for a few points"), where under
-the earlier penalties they needed 0.0011–0.05 and the stop narrowed as 0.05·(n/500)² alone, to 0.0005 at fifty lit
-voxels. Between 224 and 500 lit voxels that square is the wider, and a narrow-line scene of 397 stopped there
-1275 iterations sooner than at 0.01, as close to its answer. On small sensors, where a few points light enough of the
+so few unknowns are fixed so well by the measurement that a small distance is a large loss of PSNR. With ADMM's
+penalties for a few points (:meth:`clsdcam.algorithms.admm.algorithm.Admm.point_like`) the simulator's two-point and
+sixteen-source scenes come within 0.2 dB and 0.5° of the answer their own run converges to at tolerances of
+0.023–0.05 whatever their count ("Lighter penalties for a few points"), where under the earlier penalties they
+needed 0.0011–0.05 and the stop narrowed as 0.05·(n/500)². On small sensors, where a few points light enough of the
 frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no auto weight, or an
 algorithm without a threshold) the tolerance stays."""
 from __future__ import annotations
@@ -46,9 +44,9 @@ AUTO_AT = 30               # auto weights are chosen from the noise of this iter
 # two-point scenes count 45–98 (24–64 bands), its sixteen sources 173–445 (32–48 bands), the last 20-scene panel's
 # narrow-line scenes 397–1592 (docs/convergence.md, "A narrower stop and wider thresholds for a few lit voxels")
 FEW_POINTS = 500
-# the least share of --converge that --converge auto narrows to on a scene of a few points: the simulator's few-point
-# scenes need 0.023–0.05 with ADMM's penalties for them; 0.01 keeps twice the margin over the narrowest
-# (docs/convergence.md, "Lighter penalties for a few points")
+# --converge auto on a scene of a few points, as a share of --converge: the simulator's few-point scenes need 0.023–0.05
+# with ADMM's penalties for them; 0.01 keeps twice the margin over the narrowest (docs/convergence.md, "Lighter
+# penalties for a few points")
 FEW_POINTS_STOP = 0.2
 
 
@@ -61,13 +59,13 @@ def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool]:
     return point_like, point_like and attrs["lit_voxels"] < FEW_POINTS
 
 
-def auto_tolerance(converge: float, wide: float, point_like: bool, lit_voxels: float) -> float:
-    """``--converge auto``'s tolerance from the probe's reading (the module docstring): ``wide`` on a scene that is
-    not point-like; on a point-like one, converge·max(FEW_POINTS_STOP, (n/FEW_POINTS)²) below FEW_POINTS lit voxels,
-    else ``converge``."""
+def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: bool) -> float:
+    """``--converge auto``'s tolerance from the probe's reading (:func:`probe_reading`, the module docstring):
+    ``wide`` on a scene that is not point-like; on a point-like one, FEW_POINTS_STOP·``converge`` on a scene of a
+    few points, else ``converge``."""
     if not point_like:
         return wide
-    return converge * max(FEW_POINTS_STOP, min(1.0, lit_voxels / FEW_POINTS) ** 2)
+    return converge * FEW_POINTS_STOP if few_points else converge
 
 
 class AutoWeights:
@@ -107,7 +105,7 @@ class AutoWeights:
         """``--converge auto`` from the probe's reading (:func:`probe_reading`, the module docstring): widened on a
         scene that is not point-like, narrowed on a scene of a few points; said in a note."""
         p, n = self.chosen["mean_over_peak"], self.chosen["lit_voxels"]
-        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, n)
+        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points)
         if not point_like:
             driver.widen_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "
