@@ -236,7 +236,8 @@ def test_a_frame_whose_field_moved_starts_its_duals_afresh_in_the_last_frames_pe
     resumed = solver.solve(leds.measurement, state=moved, iters=admm.algorithm.BALANCE_AT + 2)
     assert resumed.state.carry[0].penalties == carried
     assert resumed.history[0]["data"] > 1.2 * first.history[-1]["data"]
-    fresh = solver.solve(leds.measurement, state=dataclasses.replace(first.state, carry=None), iters=admm.algorithm.BALANCE_AT + 2)
+    fresh = solver.solve(leds.measurement, state=dataclasses.replace(first.state, carry=None),
+                         iters=admm.algorithm.BALANCE_AT + 2)
     assert fresh.state.carry[0].penalties != carried
 
 

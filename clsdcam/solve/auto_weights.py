@@ -31,10 +31,10 @@ so few unknowns are fixed so well by the measurement that a small distance is a 
 penalties for a few points (:meth:`clsdcam.algorithms.admm.algorithm.Admm.point_like`) the simulator's two-point and
 sixteen-source scenes come within 0.2 dB and 0.5° of the answer their own run converges to at tolerances of
 0.023–0.05 whatever their count ("Lighter penalties for a few points"), where under the earlier penalties they
-needed 0.0011–0.05 and the stop narrowed as 0.05·(n/500)². The wider of that square and 0.01 was tried: it stopped a
-fresh sixteen-source scene of 402 lit voxels 1.14 dB short of its answer. On small sensors, where a few points light enough of the
-frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no auto weight, or an
-algorithm without a threshold) the tolerance stays."""
+needed 0.0011–0.05 and the stop narrowed as 0.05·(n/500)². The wider of that square and 0.01 was tried: it stopped
+a fresh sixteen-source scene of 402 lit voxels 1.14 dB short of its answer. On small sensors, where a few points
+light enough of the frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no
+auto weight, or an algorithm without a threshold) the tolerance stays."""
 from __future__ import annotations
 
 from .noise import residual_noise
@@ -42,7 +42,7 @@ from .noise import residual_noise
 AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
 # lit voxels (sum/peak) below which a point-like scene is one of a few points: ADMM takes its penalties for a few points
 # (Algorithm.point_like's few_points) and --converge auto narrows to FEW_POINTS_STOP of itself. The simulator's
-# two-point scenes count 45–98 (24–64 bands), its sixteen sources 173–445 (32–48 bands), the last 20-scene panel's
+# two-point scenes count 45–145 (24–64 bands), its sixteen sources 173–621 (32–48 bands), the last 20-scene panel's
 # narrow-line scenes 397–1592 (docs/convergence.md, "A narrower stop and wider thresholds for a few lit voxels")
 FEW_POINTS = 500
 # --converge auto on a scene of a few points, as a share of --converge: the simulator's few-point scenes need 0.023–0.05
