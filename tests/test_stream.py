@@ -64,7 +64,7 @@ def test_a_state_field_in_a_subspace_moves_through_its_coefficients():
     np.testing.assert_allclose(moved_field(field, basis, d), phase_shift(field, d), atol=1e-5)
 
 
-class Carried:
+class SplitsCarried:
     """An algorithm's carry: splits and duals, of which a moved field keeps ``kept``."""
 
     def __init__(self, kept):
@@ -82,11 +82,11 @@ def test_predict_state_moves_the_field_and_keeps_what_the_carry_keeps_of_itself(
 
     before, d = smooth_cube(), (0.5, 0.5)
     state = SolverState(field=before.copy(), basis=None, core=0, step_factor=0.8, weights={"tv": 1e-3}, fit=0.01,
-                        carry=(Carried("penalties"), 2.0))
+                        carry=(SplitsCarried("penalties"), 2.0))
     moved = predict_state(before, shifted(before, d), state, NumpyBackend(np.float32))
     np.testing.assert_allclose(drift(state.field, moved.field), d, atol=0.1)
     assert (moved.step_factor, moved.weights, moved.fit, moved.carry) == (0.8, {"tv": 1e-3}, 0.01, ("penalties", 2.0))
-    state.carry = (Carried(None), 2.0)
+    state.carry = (SplitsCarried(None), 2.0)
     assert predict_state(before, shifted(before, d), state, NumpyBackend(np.float32)).carry is None
     assert predict_state(None, before, state, NumpyBackend(np.float32)) is state
 

@@ -98,7 +98,7 @@ class Admm(Algorithm):
         self.state = None
         self._resumed = None
         self._iterations = 0       # this solve's, for the TV penalties' balance at BALANCE_AT (balance.py)
-        self._few_points = False   # the probe's word that the scene is a few points (point_like): the balance's C
+        self._few_points = False   # the probe's word that the scene is a few points: the balance's C and floor
 
     def iterate(self, problem) -> dict:
         if self.splitting is None:
