@@ -6,7 +6,7 @@ import pytest
 
 from clsdcam.algorithms.admm import Admm, balance
 from clsdcam.algorithms.admm.algorithm import NONNEG, NONNEG_FEW_POINTS, TV
-from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS, FEW_POINTS_STOP, AutoWeights
+from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.sim import simulate
@@ -149,7 +149,7 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monk
     told, real = [], balance.balance
     monkeypatch.setattr(balance, "balance", lambda *a: told.append(a[3]) or real(*a))
     reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT + 1, algorithm="admm")
-    assert admm.attrs["lit_voxels"] < FEW_POINTS and told == [True]
+    assert admm.attrs["lit_per_pixel"] < FEW_POINTS_PER_PIXEL and told == [True]
     fista = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="fista")
     assert "mean_over_peak" not in fista.attrs
     assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))
@@ -161,27 +161,29 @@ def lit_voxels(n: int, shape=(4, 128, 128)) -> np.ndarray:
     return cube
 
 
-MANY = (16, 128, 128)     # FEW_POINTS lit voxels of these are point-like (p = 500/262144)
+MANY = (32, 128, 128)     # 0.04 lit voxels a pixel: 655.36 of these, point-like (p = 655/524288 < 0.0025)
 
 
 @pytest.mark.parametrize("cube, tolerance, said, few_points", [
-    (lit_voxels(FEW_POINTS, MANY), CONVERGE, None, False),     # point-like, not a few points: CONVERGE
-    (lit_voxels(FEW_POINTS - 1, MANY), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 499 < 500", True),
-    (lit_voxels(120), CONVERGE * FEW_POINTS_STOP, "a point-like scene of few lit voxels: 120 < 500", True),
-    (one_lit_pixel(), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 1 < 500", True),
+    (lit_voxels(656, MANY), CONVERGE, None, False),     # point-like, not a few points: CONVERGE
+    (lit_voxels(655, MANY), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 655, ", True),
+    (lit_voxels(120), CONVERGE * FEW_POINTS_STOP, "a point-like scene of few lit voxels: 120, 0.0073 a pixel < 0.04",
+     True),
+    (one_lit_pixel(), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 1, 0.00098 a pixel < 0.04", True),
     (np.full((4, 32, 32), 0.5), CONVERGE_WIDE, "not a point-like scene", None),
     (np.zeros((4, 32, 32)), CONVERGE_WIDE, "not a point-like scene", None),   # a dark iterate counts as p = 1
 ])
 def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tolerance, said, few_points):
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
-    point-like threshold, CONVERGE below it, CONVERGE·FEW_POINTS_STOP below FEW_POINTS; a note says so where it
-    moved. The algorithm hears whether a point-like scene is one of a few points, fewer than FEW_POINTS (None: not
-    told)."""
+    point-like threshold, CONVERGE below it, CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
+    pixel (n/(H·W)); a note says so where it moved. The algorithm hears whether a point-like scene is one of a few
+    points (None: not told)."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)
     assert stand_in.told_few_points is few_points
     assert stand_in.rules.converge == pytest.approx(tolerance, rel=1e-12)
     assert weights.chosen["lit_voxels"] == pytest.approx(cube.sum() / cube.max() if cube.any() else cube.size)
+    assert weights.chosen["lit_per_pixel"] == pytest.approx(weights.chosen["lit_voxels"] * cube.shape[0] / cube.size)
     stops = [line for line in stand_in.notes if line.startswith("stop: --converge auto, ")]
     assert [said in line for line in stops] == ([] if said is None else [True])
     assert said is None or stops[0].startswith(f"stop: --converge auto, {tolerance:.2g} (")
@@ -230,8 +232,9 @@ def test_a_solve_widens_its_stop_on_a_spread_scene_and_narrows_it_on_a_few_point
     with monkeypatch.context() as patch:
         patch.setattr(settings, "AUTO_CAP", 400)
         narrow = reconstruct(point.measurement, point.calibration)
-    few = narrow.attrs["lit_voxels"]
-    assert narrow.attrs["mean_over_peak"] < Admm.point_like_below and 3 <= few < FEW_POINTS
+    assert narrow.attrs["mean_over_peak"] < Admm.point_like_below and narrow.attrs["lit_voxels"] >= 3
+    assert narrow.attrs["lit_per_pixel"] == pytest.approx(narrow.attrs["lit_voxels"] / (48 * 64), rel=1e-12)
+    assert narrow.attrs["lit_per_pixel"] < FEW_POINTS_PER_PIXEL
     assert narrow.attrs["stop_tolerance"] == pytest.approx(CONVERGE * FEW_POINTS_STOP, rel=1e-12)
     assert (narrow.stop_reason, narrow.iterations) == ("iterations", 400)
     assert narrow.attrs["distance_estimate"] > narrow.attrs["stop_tolerance"]

@@ -68,7 +68,8 @@ def run_scene(plan: dict, args) -> dict:
     answer, before = points[-1], next(p for p in points if p["iteration"] >= points[-1]["iteration"] - SETTLED_OVER)
     point_like, few_points = probe_reading(attrs, POINT_LIKE_BELOW)
     default = auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points)
-    return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"], "point_like": point_like,
+    return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
+            "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
             "answer": {"psnr": answer["psnr"], "angle": answer["angle"], "drift_db": answer["psnr"] - before["psnr"],
                        "drift_deg": answer["angle"] - before["angle"]},
             "default": stop(points, answer, default), "stops": [stop(points, answer, t) for t in args.tolerances],
@@ -97,13 +98,14 @@ def markdown(results: dict) -> str:
     head = [f"Seed {results['seed']}, {results['size']}×{results['bands']}: the default's trajectory run "
             f"{results['iters']} iterations; the answer is its last cube. Cells: where the stop ends (cap "
             f"{AUTO_CAP}), and its PSNR / angle against the answer's (within: ≥ −0.2 dB and ≤ +0.5°).", "",
-            "| # | kind | n | answer | its drift over the last 1000 | default's stop | "
+            "| # | kind | n (a pixel) | answer | its drift over the last 1000 | default's stop | "
             + " | ".join(f"at {t:g}" for t in tolerances) + " | needs |",
             "|---:|---|---:|---|---|---|" + "---|" * len(tolerances) + "---|"]
     rows = []
     for s in results["scenes"]:
         a, needs = s["answer"], s["needs"]
-        rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {s['lit_voxels']:.0f} | {a['psnr']:.2f} dB / "
+        rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {s['lit_voxels']:.0f} ({s['lit_per_pixel']:.3f}) | "
+                    f"{a['psnr']:.2f} dB / "
                     f"{a['angle']:.2f}° | {a['drift_db']:+.2f} dB / {a['drift_deg']:+.2f}° | "
                     f"{s['default']['tolerance']:.2g} → {stop_cell(s['default'])} | "
                     + " | ".join(stop_cell(found) for found in s["stops"])

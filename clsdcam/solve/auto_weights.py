@@ -16,14 +16,14 @@ blurrier. Below it, a rule with a ``point_noise`` lightens the weight in good li
 (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`). A warm start from a cube (``x0``) reads its own iterate there;
 a dark iterate counts as p = 1.
 
-Below it, too, the algorithm is told, and whether the scene is one of a few points, fewer than ``FEW_POINTS`` lit
-voxels (below): ``Algorithm.point_like`` (ADMM lightens its non-negativity penalty, and on a few points widens its TV
-thresholds).
+Below it, too, the algorithm is told, and whether the scene is one of a few points, fewer than
+``FEW_POINTS_PER_PIXEL`` lit voxels a window pixel (below): ``Algorithm.point_like`` (ADMM lightens its
+non-negativity penalty, and on a few points widens its TV thresholds).
 At or above it, the automatic stop may widen its tolerance (``wide_stop``, ``--converge auto``): the scenes the
 probe passes reach the model's answer, within the rules of docs/convergence.md, at a distance of 0.1 where the
-point-like ones need 0.05 ("The stop widened where the scene is not point-like"). On a point-like scene of fewer
-than ``FEW_POINTS`` lit voxels by the same iterate's count n = sum(v)/max(v) (p times the window's voxels: a count
-that does not fall as the sensor grows, as p does), the tolerance narrows to
+point-like ones need 0.05 ("The stop widened where the scene is not point-like"). The same iterate's count of lit
+voxels is n = sum(v)/max(v) (p times the window's voxels); on a point-like scene where n over the window's H·W
+pixels (p·K) is under ``FEW_POINTS_PER_PIXEL``, the tolerance narrows to
 
     D = ``FEW_POINTS_STOP``·0.05 = 0.01:
 
@@ -33,18 +33,25 @@ sixteen-source scenes come within 0.2 dB and 0.5° of the answer their own run c
 0.023–0.05 whatever their count ("Lighter penalties for a few points"), where under the earlier penalties they
 needed 0.0011–0.05 and the stop narrowed as 0.05·(n/500)². The wider of that square and 0.01 was tried: it stopped
 a fresh sixteen-source scene of 402 lit voxels 1.14 dB short of its answer. On small sensors, where a few points
-light enough of the frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no
+light enough of the frame for p to pass the threshold, the stop widens as before.
+
+Why per pixel: at iteration 30 each point is still spread by the caustic, whose extent grows with the field, so a
+scene's n grows with the sensor: sixteen sources count 173–250 at 96×112, 265–448 at 112×144 and 302–621 at
+128×160, but 1.5–3.0 % of the window's pixels at all three. A gate of 500 lit voxels, set at the first two sizes,
+passed a sixteen-source scene of 621 at 128×160, which then stopped at the cap 3 dB short of its answer
+(docs/convergence.md, "A few points counted per pixel"). Where the probe does not run (no
 auto weight, or an algorithm without a threshold) the tolerance stays."""
 from __future__ import annotations
 
 from .noise import residual_noise
 
 AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
-# lit voxels (sum/peak) below which a point-like scene is one of a few points: ADMM takes its penalties for a few points
-# (Algorithm.point_like's few_points) and --converge auto narrows to FEW_POINTS_STOP of itself. The simulator's
-# two-point scenes count 45–145 (24–64 bands), its sixteen sources 173–621 (32–48 bands), the last 20-scene panel's
-# narrow-line scenes 397–1592 (docs/convergence.md, "A narrower stop and wider thresholds for a few lit voxels")
-FEW_POINTS = 500
+# lit voxels (sum/peak) a window pixel below which a point-like scene is one of a few points: ADMM takes its penalties
+# for a few points (Algorithm.point_like's few_points) and --converge auto narrows to FEW_POINTS_STOP of itself. The
+# simulator's two-point scenes count 0.004–0.009 a pixel, its sixteen sources 0.015–0.030 (96×112 to 128×160, 32–48
+# bands), the narrow-line scenes of a 20-scene 128×160×64 panel 0.019–0.078 (docs/convergence.md, "A few points
+# counted per pixel")
+FEW_POINTS_PER_PIXEL = 0.04
 # --converge auto on a scene of a few points, as a share of --converge: the simulator's few-point scenes need 0.023–0.05
 # with ADMM's penalties for them; 0.01 keeps twice the margin over the narrowest (docs/convergence.md, "Lighter
 # penalties for a few points")
@@ -53,11 +60,11 @@ FEW_POINTS_STOP = 0.2
 
 def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool]:
     """(point-like, a few points) from the probe's attributes ``mean_over_peak`` (p) and ``lit_voxels`` (n) of a
-    solve or its result: p below the algorithm's threshold, and then n below FEW_POINTS; (False, False) where the
-    probe did not measure."""
+    solve or its result: p below the algorithm's threshold, and then n a window pixel (``lit_per_pixel``) below
+    FEW_POINTS_PER_PIXEL; (False, False) where the probe did not measure."""
     p = attrs.get("mean_over_peak")
     point_like = p is not None and p < point_like_below
-    return point_like, point_like and attrs["lit_voxels"] < FEW_POINTS
+    return point_like, point_like and attrs["lit_per_pixel"] < FEW_POINTS_PER_PIXEL
 
 
 def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: bool) -> float:
@@ -105,7 +112,7 @@ class AutoWeights:
     def _tune_stop(self, driver, point_like: bool, few_points: bool) -> None:
         """``--converge auto`` from the probe's reading (:func:`probe_reading`, the module docstring): widened on a
         scene that is not point-like, narrowed on a scene of a few points; said in a note."""
-        p, n = self.chosen["mean_over_peak"], self.chosen["lit_voxels"]
+        p, n, per_pixel = (self.chosen[name] for name in ("mean_over_peak", "lit_voxels", "lit_per_pixel"))
         tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points)
         if not point_like:
             driver.widen_stop(tolerance)
@@ -114,18 +121,19 @@ class AutoWeights:
         elif few_points:
             driver.narrow_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a point-like scene of few lit voxels: "
-                        f"{n:.3g} < {FEW_POINTS})")
+                        f"{n:.3g}, {per_pixel:.2g} a pixel < {FEW_POINTS_PER_PIXEL:g})")
 
     def _measure_likeness(self, problem, x) -> None:
-        """The iterate's window's p = mean/max, kept as the attribute ``mean_over_peak``, and n = p times the window's
-        voxels as ``lit_voxels`` (:func:`probe_reading` reads them); not measured where the algorithm's threshold is
-        0."""
+        """The iterate's window's p = mean/max, kept as the attribute ``mean_over_peak``, n = p times the window's
+        voxels as ``lit_voxels`` and n over its pixels as ``lit_per_pixel`` (:func:`probe_reading` reads them); not
+        measured where the algorithm's threshold is 0."""
         if not self.point_like_below:
             return
         window = problem.model.window(problem.solution(x))
         peak = float(window.max())
         self.chosen["mean_over_peak"] = float(window.mean(dtype=float)) / peak if peak > 0 else 1.0
         self.chosen["lit_voxels"] = self.chosen["mean_over_peak"] * window.size
+        self.chosen["lit_per_pixel"] = self.chosen["lit_voxels"] * window.shape[0] / window.size
 
     def unchosen(self, driver) -> None:
         """Say, for each weight still pending after the driver's solve (fewer than AUTO_AT iterations), that the

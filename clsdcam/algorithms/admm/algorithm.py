@@ -39,9 +39,9 @@ RELAXATION = 1.7
 # μ₃'s constant on a point-like scene, from the probe's iteration on: the narrow-line scenes reach the model's answer
 # in half the iterations or less (docs/convergence.md, "A lighter non-negativity penalty for point-like scenes")
 NONNEG_POINT_LIKE = 3e-3
-# and on a scene of a few points (the probe's count, clsdcam.solve.auto_weights.FEW_POINTS): lighter still, the
-# sixteen-source scenes reach their answer in about half the iterations (docs/convergence.md, "Lighter penalties for a
-# few points")
+# and on a scene of a few points (the probe's count, clsdcam.solve.auto_weights.FEW_POINTS_PER_PIXEL): lighter still,
+# the sixteen-source scenes reach their answer in about half the iterations (docs/convergence.md, "Lighter penalties
+# for a few points")
 NONNEG_FEW_POINTS = 1e-3
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
 # mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64

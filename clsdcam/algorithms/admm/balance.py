@@ -33,8 +33,8 @@ from .host_steps import difference
 from .terms import Penalties, SplitState, SplittingBase
 
 THRESHOLD_OVER_RMS = 2.0      # C: chosen on the tuning panel (docs/convergence.md)
-# C on a scene of a few points (the probe's count, clsdcam.solve.auto_weights.FEW_POINTS): the differences' RMS over
-# a black cube is far below the points' own edges (docs/convergence.md, "Wider TV thresholds for a few points")
+# C on a scene of a few points (the probe's count, clsdcam.solve.auto_weights.FEW_POINTS_PER_PIXEL): the differences'
+# RMS over a black cube is far below the points' own edges (docs/convergence.md, "Wider TV thresholds for a few points")
 THRESHOLD_FEW_POINTS = 16.0
 BALANCE_RANGE = 64.0          # β_d within [1/64, 64]
 # the floor of β_d on a scene of a few points: with C = 16 the sixteen-source scenes ask 1/130–1/260 of the camera's
