@@ -166,10 +166,11 @@ MANY = (32, 128, 128)     # 0.04 lit voxels a pixel: 655.36 of these, point-like
 
 @pytest.mark.parametrize("cube, tolerance, said, few_points", [
     (lit_voxels(656, MANY), CONVERGE, None, False),     # point-like, not a few points: CONVERGE
-    (lit_voxels(655, MANY), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 655, ", True),
-    (lit_voxels(120), CONVERGE * FEW_POINTS_STOP, "a point-like scene of few lit voxels: 120, 0.0073 a pixel < 0.04",
+    (lit_voxels(655, MANY), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 655, 0.03998 a pixel < 0.04", True),
+    (lit_voxels(93, (32, 48, 48)), CONVERGE, None, False),    # under 500 lit voxels, over 0.04 a pixel: not a few
+    (lit_voxels(120), CONVERGE * FEW_POINTS_STOP, "a point-like scene of few lit voxels: 120, 0.007324 a pixel < 0.04",
      True),
-    (one_lit_pixel(), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 1, 0.00098 a pixel < 0.04", True),
+    (one_lit_pixel(), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 1, 0.0009766 a pixel < 0.04", True),
     (np.full((4, 32, 32), 0.5), CONVERGE_WIDE, "not a point-like scene", None),
     (np.zeros((4, 32, 32)), CONVERGE_WIDE, "not a point-like scene", None),   # a dark iterate counts as p = 1
 ])
@@ -183,7 +184,8 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tol
     assert stand_in.told_few_points is few_points
     assert stand_in.rules.converge == pytest.approx(tolerance, rel=1e-12)
     assert weights.chosen["lit_voxels"] == pytest.approx(cube.sum() / cube.max() if cube.any() else cube.size)
-    assert weights.chosen["lit_per_pixel"] == pytest.approx(weights.chosen["lit_voxels"] * cube.shape[0] / cube.size)
+    pixels = cube.shape[1] * cube.shape[2]
+    assert weights.chosen["lit_per_pixel"] == pytest.approx(weights.chosen["lit_voxels"] / pixels)
     stops = [line for line in stand_in.notes if line.startswith("stop: --converge auto, ")]
     assert [said in line for line in stops] == ([] if said is None else [True])
     assert said is None or stops[0].startswith(f"stop: --converge auto, {tolerance:.2g} (")

@@ -33,14 +33,14 @@ sixteen-source scenes come within 0.2 dB and 0.5° of the answer their own run c
 0.023–0.05 whatever their count ("Lighter penalties for a few points"), where under the earlier penalties they
 needed 0.0011–0.05 and the stop narrowed as 0.05·(n/500)². The wider of that square and 0.01 was tried: it stopped
 a fresh sixteen-source scene of 402 lit voxels 1.14 dB short of its answer. On small sensors, where a few points
-light enough of the frame for p to pass the threshold, the stop widens as before.
+light enough of the frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no
+auto weight, or an algorithm without a threshold) the tolerance stays.
 
 Why per pixel: at iteration 30 each point is still spread by the caustic, whose extent grows with the field, so a
-scene's n grows with the sensor: sixteen sources count 173–250 at 96×112, 265–448 at 112×144 and 302–621 at
-128×160, but 1.5–3.0 % of the window's pixels at all three. A gate of 500 lit voxels, set at the first two sizes,
-passed a sixteen-source scene of 621 at 128×160, which then stopped at the cap 3 dB short of its answer
-(docs/convergence.md, "A few points counted per pixel"). Where the probe does not run (no
-auto weight, or an algorithm without a threshold) the tolerance stays."""
+scene's n grows with the sensor: sixteen sources count 173–250 at 96×112, 265–448 at 112×144, 302–621 at 128×160
+and 551–655 at 160×192, but 0.015–0.030 lit voxels a pixel at every size. A gate of 500 lit voxels, set at the
+first two sizes, passed a sixteen-source scene of 621 at 128×160, which then stopped at the cap 3 dB short of its
+answer (docs/convergence.md, "A few points counted per pixel")."""
 from __future__ import annotations
 
 from .noise import residual_noise
@@ -59,9 +59,9 @@ FEW_POINTS_STOP = 0.2
 
 
 def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool]:
-    """(point-like, a few points) from the probe's attributes ``mean_over_peak`` (p) and ``lit_voxels`` (n) of a
-    solve or its result: p below the algorithm's threshold, and then n a window pixel (``lit_per_pixel``) below
-    FEW_POINTS_PER_PIXEL; (False, False) where the probe did not measure."""
+    """(point-like, a few points) from the probe's attributes ``mean_over_peak`` (p) and ``lit_per_pixel`` (n/(H·W))
+    of a solve or its result: p below the algorithm's threshold, and then n/(H·W) below FEW_POINTS_PER_PIXEL; (False,
+    False) where the probe did not measure."""
     p = attrs.get("mean_over_peak")
     point_like = p is not None and p < point_like_below
     return point_like, point_like and attrs["lit_per_pixel"] < FEW_POINTS_PER_PIXEL
@@ -121,7 +121,7 @@ class AutoWeights:
         elif few_points:
             driver.narrow_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a point-like scene of few lit voxels: "
-                        f"{n:.3g}, {per_pixel:.2g} a pixel < {FEW_POINTS_PER_PIXEL:g})")
+                        f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g})")
 
     def _measure_likeness(self, problem, x) -> None:
         """The iterate's window's p = mean/max, kept as the attribute ``mean_over_peak``, n = p times the window's
@@ -133,7 +133,7 @@ class AutoWeights:
         peak = float(window.max())
         self.chosen["mean_over_peak"] = float(window.mean(dtype=float)) / peak if peak > 0 else 1.0
         self.chosen["lit_voxels"] = self.chosen["mean_over_peak"] * window.size
-        self.chosen["lit_per_pixel"] = self.chosen["lit_voxels"] * window.shape[0] / window.size
+        self.chosen["lit_per_pixel"] = self.chosen["mean_over_peak"] * window.shape[0]      # n/(H·W) = p·K
 
     def unchosen(self, driver) -> None:
         """Say, for each weight still pending after the driver's solve (fewer than AUTO_AT iterations), that the
