@@ -105,8 +105,7 @@ def markdown(results: dict) -> str:
     for s in results["scenes"]:
         a, needs = s["answer"], s["needs"]
         rows.append(f"| {s['index']} | {s['kind']}, {s['level']} | {s['lit_voxels']:.0f} ({s['lit_per_pixel']:.3g}) | "
-                    f"{a['psnr']:.2f} dB / "
-                    f"{a['angle']:.2f}° | {a['drift_db']:+.2f} dB / {a['drift_deg']:+.2f}° | "
+                    f"{a['psnr']:.2f} dB / {a['angle']:.2f}° | {a['drift_db']:+.2f} dB / {a['drift_deg']:+.2f}° | "
                     f"{s['default']['tolerance']:.2g} → {stop_cell(s['default'])} | "
                     + " | ".join(stop_cell(found) for found in s["stops"])
                     + f" | {'–' if needs is None else format(needs['tolerance'], '.2g')} |")

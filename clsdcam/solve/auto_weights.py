@@ -48,7 +48,7 @@ from .noise import residual_noise
 AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
 # lit voxels (sum/peak) a window pixel below which a point-like scene is one of a few points: ADMM takes its penalties
 # for a few points (Algorithm.point_like's few_points) and --converge auto narrows to FEW_POINTS_STOP of itself. The
-# simulator's two-point scenes count 0.004–0.009 a pixel, its sixteen sources 0.015–0.030 (96×112 to 128×160, 32–48
+# simulator's two-point scenes count 0.004–0.009 a pixel, its sixteen sources 0.015–0.030 (96×112 to 160×192, 32–48
 # bands), the narrow-line scenes of a 20-scene 128×160×64 panel 0.019–0.078 (docs/convergence.md, "A few points
 # counted per pixel")
 FEW_POINTS_PER_PIXEL = 0.04
