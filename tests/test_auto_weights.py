@@ -67,9 +67,9 @@ class Residual:
     def note(self, *lines):
         self.notes += lines
 
-    def point_like(self, few_points):
+    def point_like(self, few_points, noise):
         self.told_point_like += 1
-        self.told_few_points = few_points
+        self.told_few_points, self.told_noise = few_points, noise
 
 
 def test_act_chooses_from_the_noise_and_rescores():
@@ -178,10 +178,11 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tol
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
     point-like threshold, CONVERGE below it, CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
     pixel (n/(H·W)); a note says so where it moved. The algorithm hears whether a point-like scene is one of a few
-    points (None: not told)."""
+    points (None: not told), and the noise the probe read."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)
     assert stand_in.told_few_points is few_points
+    assert few_points is None or stand_in.told_noise == weights.chosen["noise_estimate"] == pytest.approx(0.003, 0.05)
     assert stand_in.rules.converge == pytest.approx(tolerance, rel=1e-12)
     assert weights.chosen["lit_voxels"] == pytest.approx(cube.sum() / cube.max() if cube.any() else cube.size)
     pixels = cube.shape[1] * cube.shape[2]

@@ -113,23 +113,24 @@ def scene_weight(sim, weight_from: str) -> tuple[float, dict]:
     that run's probe tells ADMM, :func:`told_point_like`'s arguments (FISTA's run reads no probe: nothing)."""
     weight_run, _ = timed_solve(sim, TODAY if weight_from == "today" else {})
     point_like, few_points = probe_reading(weight_run.attrs, POINT_LIKE_BELOW)
-    return float(weight_run.attrs["tv_chosen"]), {"point_like": point_like, "few_points": few_points}
+    return float(weight_run.attrs["tv_chosen"]), {"point_like": point_like, "few_points": few_points,
+                                                  "noise": weight_run.attrs.get("noise_estimate")}
 
 
 @contextmanager
-def told_point_like(point_like: bool = False, few_points: bool = False):
+def told_point_like(point_like: bool = False, few_points: bool = False, noise: float | None = None):
     """While it lasts, where ``point_like``, every ADMM solve is told so before its iteration AUTO_AT + 1 (and
-    whether the scene is ``few_points``), as the default's probe tells it (``Admm.point_like``): a run at a given
-    weight reads no probe, so without this it would keep the penalties of the spread scenes where the default's
-    change. Only for solves at a given weight: a solve with ``--tv auto`` reads its own probe and would be told
-    twice."""
+    whether the scene is ``few_points``, and the probe's ``noise``), as the default's probe tells it
+    (``Admm.point_like``): a run at a given weight reads no probe, so without this it would keep the penalties of the
+    spread scenes where the default's change. Only for solves at a given weight: a solve with ``--tv auto`` reads its
+    own probe and would be told twice."""
     from clsdcam.algorithms.admm.algorithm import Admm
 
     plain = Admm.iterate
 
     def iterate(algorithm, problem):
         if algorithm._iterations == AUTO_AT:
-            algorithm.point_like(few_points)
+            algorithm.point_like(few_points, noise)
         return plain(algorithm, problem)
 
     Admm.iterate = iterate if point_like else plain

@@ -84,10 +84,11 @@ class Algorithm:
         """Every iterate through ``mapping`` (into another space), momentum kept."""
         raise InputError(f"--algorithm {self.name} runs in band space: no --subspace or --rank")
 
-    def point_like(self, few_points: bool = False) -> None:
-        """The auto weights' probe found the scene point-like (:mod:`clsdcam.solve.auto_weights`), and whether it
-        is a scene of ``few_points``: an algorithm with a setting of its own for such scenes takes it (ADMM: a
-        lighter non-negativity penalty, and on a few points wider TV thresholds). Nothing by default."""
+    def point_like(self, few_points: bool = False, noise: float | None = None) -> None:
+        """The auto weights' probe found the scene point-like (:mod:`clsdcam.solve.auto_weights`), whether it is a
+        scene of ``few_points``, and the ``noise`` σ̂ it read (relative to max|b|): an algorithm with a setting of its
+        own for such scenes takes it (ADMM: a lighter non-negativity penalty, on a few points wider TV thresholds, and
+        there in good light every penalty lighter). Nothing by default."""
 
     def carry(self):
         """What a video's next frame resumes from besides its iterate (:class:`clsdcam.solve.state.SolverState`), or

@@ -17,8 +17,9 @@ blurrier. Below it, a rule with a ``point_noise`` lightens the weight in good li
 a dark iterate counts as p = 1.
 
 Below it, too, the algorithm is told, and whether the scene is one of a few points, fewer than
-``FEW_POINTS_PER_PIXEL`` lit voxels a window pixel (below): ``Algorithm.point_like`` (ADMM lightens its
-non-negativity penalty, and on a few points widens its TV thresholds).
+``FEW_POINTS_PER_PIXEL`` lit voxels a window pixel (below), with the noise σ̂: ``Algorithm.point_like`` (ADMM
+lightens its non-negativity penalty, on a few points widens its TV thresholds, and there in good light lightens every
+penalty).
 At or above it, the automatic stop may widen its tolerance (``wide_stop``, ``--converge auto``): the scenes the
 probe passes reach the model's answer, within the rules of docs/convergence.md, at a distance of 0.1 where the
 point-like ones need 0.05 ("The stop widened where the scene is not point-like"). The same iterate's count of lit
@@ -105,7 +106,7 @@ class AutoWeights:
         self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)
         if point_like:
-            driver.algorithm.point_like(few_points)
+            driver.algorithm.point_like(few_points, noise)
         if self.wide_stop and "mean_over_peak" in self.chosen:
             self._tune_stop(driver, point_like, few_points)
 

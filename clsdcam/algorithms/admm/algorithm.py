@@ -11,7 +11,9 @@ scales (so a brighter scene, another PSF normalisation or filter gain needs no n
 balancing is not used: docs/admm.md). After ``BALANCE_AT`` iterations the TV split's is set along each axis from the
 iterate's differences, once (:mod:`.balance`); where the auto weights' probe finds the scene point-like (at the same
 iteration), the non-negativity split's drops to ``NONNEG_POINT_LIKE``, and on a scene of a few points to
-``NONNEG_FEW_POINTS`` while the balance widens its thresholds (:meth:`Admm.point_like`).
+``NONNEG_FEW_POINTS`` while the balance widens its thresholds; on a scene of a few points in good light (the probe's
+noise σ̂ under ``GOOD_LIGHT_BELOW`` of max|b|) every penalty is then ``LIGHTER_FEW_POINTS`` of itself
+(:meth:`Admm.point_like`).
 
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
@@ -21,6 +23,7 @@ programs (:class:`~.kernel_steps.KernelSplitting`): :func:`band_steps` picks the
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from ...backends.base import Programs
@@ -43,6 +46,14 @@ NONNEG_POINT_LIKE = 3e-3
 # the sixteen-source scenes reach their answer in about half the iterations (docs/convergence.md, "Lighter penalties
 # for a few points")
 NONNEG_FEW_POINTS = 1e-3
+# and on a scene of a few points in good light, every penalty times LIGHTER_FEW_POINTS (μ₁ and μ₃ halved; the balance
+# then sets μ₂,d from the thresholds): the standard-light sixteen-source scenes of 128×160 and larger sensors reach
+# their answer hundreds to thousands of iterations sooner, where in low light the same change costs iterations
+# (docs/convergence.md, "Halved penalties for a few points in good light"). Good light is the probe's noise σ̂ under
+# GOOD_LIGHT_BELOW of max|b|: 0.0022–0.0044 on the simulator's standard-light points and sources (96×112 to
+# 160×192), 0.0057–0.0106 in its low light
+LIGHTER_FEW_POINTS = 0.5
+GOOD_LIGHT_BELOW = 0.005
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
 # mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64
 # panels' lines scenes, 0.0035–0.21 on their other 80 (docs/convergence.md, "A lighter weight for point-like scenes")
@@ -106,7 +117,7 @@ class Admm(Algorithm):
         if self._iterations == BALANCE_AT and self.splitting.axes and self.state.penalties.tv_balance is None:
             from .balance import balance
 
-            balance(self.splitting, self.state, self.backend.to_host(self.state.w), self._few_points)
+            balance(self.splitting, self.state, self.backend, self._few_points)
         self._iterations += 1
         data, (step, norm) = self.splitting.iterate(self.state)
         return {"data": data, "change": ratio(step, norm)}
@@ -144,17 +155,22 @@ class Admm(Algorithm):
             return
         self.state, _ = self.splitting.start(point)
 
-    def point_like(self, few_points: bool = False) -> None:
+    def point_like(self, few_points: bool = False, noise: float | None = None) -> None:
         """The scene is point-like (the auto weights' probe, :mod:`clsdcam.solve.auto_weights`): μ₃ from ``NONNEG`` to
-        ``NONNEG_POINT_LIKE`` of the same scale, or ``NONNEG_FEW_POINTS`` on a scene of ``few_points``, the solve going
-        on from the same point (:func:`.balance.repenalise`); on a scene of a few points the TV balance still to come
-        sets wider thresholds, and may set lower penalties (:mod:`.balance`)."""
+        ``NONNEG_POINT_LIKE`` of the same scale, or ``NONNEG_FEW_POINTS`` on a scene of ``few_points``, and there in
+        good light (the probe's ``noise`` under GOOD_LIGHT_BELOW) every penalty then LIGHTER_FEW_POINTS of itself, the
+        solve going on from the same point (:func:`.balance.repenalise`); on a scene of a few points the TV balance
+        still to come sets wider thresholds, and may set lower penalties (:mod:`.balance`)."""
         self._few_points = few_points
         if self.state is not None:
             from .balance import repenalise
 
             constant = NONNEG_FEW_POINTS if few_points else NONNEG_POINT_LIKE
-            repenalise(self.splitting, self.state, self.backend, constant / NONNEG)
+            old = self.splitting.penalties
+            new = replace(old, nonneg=old.nonneg * constant / NONNEG)
+            if few_points and noise is not None and noise < GOOD_LIGHT_BELOW:
+                new = new.scaled(LIGHTER_FEW_POINTS)
+            repenalise(self.splitting, self.state, self.backend, new)
 
     def carry(self):
         """What the next frame's solve resumes from: the splits and duals (None before the first iteration)."""

@@ -14,14 +14,18 @@ few points (the probe's count, :mod:`clsdcam.solve.auto_weights`) C is ``THRESHO
 cube is set by how few voxels are lit, far below the points' own edges, and C = 2 there left ADMM hundreds to
 thousands of iterations slower (docs/convergence.md, "Wider TV thresholds for a few points"); and β_d may fall to
 ``FLOOR_FEW_POINTS`` there, where the floor 1/``BALANCE_RANGE`` held the sixteen-source scenes' penalties up to 4
-times above what C asks ("Lighter penalties for a few points"). The unscaled
-duals μ₂,d·η_d are kept (η_d ← r_d·η_d, s_d ← s_d + (1 − r_d)η_d with r_d = μ₂,d/μ₂,d', so u_d = s_d + η_d stays):
-the iteration goes on from the same point, with one new divisor. The RMS is read on the host (one download of w,
+times above what C asks ("Lighter penalties for a few points"). The RMS is read on the host (one download of w,
 once per solve), so both backends set the same penalties.
 
-The non-negativity split's penalty is changed the same way (:func:`repenalise`, a point-like scene's): with μ₃ → μ₃',
-the unscaled dual μ₃ρ is kept (ρ ← (μ₃/μ₃')ρ) and the c-step's right-hand side μ₃(w − ρ), which the last w-step left
-in ``rest``, becomes μ₃'(w − ρ') = rest + (μ₃' − μ₃)w.
+Any change of penalties between two iterations (the balance's, a point-like scene's, :func:`repenalise`) keeps
+every unscaled dual, so the iteration goes on from the same point with new divisors (ADMM's fixed point, the splits
+and the unscaled duals, does not depend on the penalties):
+
+* μ₂,d → μ₂,d': η_d ← r_d·η_d and s_d ← s_d + (1 − r_d)η_d with r_d = μ₂,d/μ₂,d', so u_d = s_d + η_d stays;
+* μ₃ → μ₃': ρ ← (μ₃/μ₃')ρ, and the c-step's right-hand side μ₃(w − ρ), which the last w-step left in ``rest``,
+  becomes μ₃'(w − ρ') = rest + (μ₃' − μ₃)w;
+* μ₁ → μ₁': ξ ← r·ξ with r = μ₁/μ₁', and the data term's x − ξ, which the last x-step left in ``hv`` on the sensor
+  window, becomes x − ξ' = hv + (1 − r)ξ there.
 """
 from __future__ import annotations
 
@@ -64,27 +68,31 @@ def balanced_penalties(split: SplittingBase, rms: dict[int, float], threshold_ov
     return replace(p, tv_balance=tuple(betas))
 
 
-def balance(split: SplittingBase, state: SplitState, w_host: np.ndarray, few_points: bool = False) -> Penalties:
-    """Set the balanced penalties from the iterate ``w_host`` (w on the host), C and the floor the ``few_points``
-    ones on a scene of a few points, the TV duals rescaled to keep the unscaled ones; the state records them (a
-    video's next frame resumes with them). Returns them."""
-    old = split.penalties
+def balance(split: SplittingBase, state: SplitState, backend, few_points: bool = False) -> Penalties:
+    """Set the balanced penalties from the iterate w (read on the host from ``backend``), C and the floor the
+    ``few_points`` ones on a scene of a few points, the duals carried over (:func:`repenalise`). Returns them."""
     threshold, floor = ((THRESHOLD_FEW_POINTS, FLOOR_FEW_POINTS) if few_points
                         else (THRESHOLD_OVER_RMS, 1.0 / BALANCE_RANGE))
-    new = balanced_penalties(split, difference_rms(split, w_host), threshold, floor)
-    split.rescale_tv_duals(state, {axis: old.tv_along(axis) / new.tv_along(axis) for axis in split.axes})
-    split.set_penalties(new)
-    state.penalties = new
-    return new
+    rms = difference_rms(split, backend.to_host(state.w))
+    return repenalise(split, state, backend, balanced_penalties(split, rms, threshold, floor))
 
 
-def repenalise(split: SplittingBase, state: SplitState, backend, factor: float) -> Penalties:
-    """μ₃ ← ``factor``·μ₃ between two iterations, ρ and ``rest`` carried over (the module docstring) with the backend's
-    vector operations; the state records the penalties. Returns them."""
+def repenalise(split: SplittingBase, state: SplitState, backend, new: Penalties) -> Penalties:
+    """Go on under the ``new`` penalties between two iterations, every unscaled dual kept (the module docstring) with
+    the backend's vector operations; the state records them (a video's next frame resumes with them). Returns
+    them."""
     old = split.penalties
-    new = replace(old, nonneg=old.nonneg * factor)
-    backend.scale(old.nonneg / new.nonneg, state.rho, out=state.rho)
-    backend.axpy(new.nonneg - old.nonneg, state.w, state.rest, out=state.rest)
+    if new.data != old.data:
+        keep = old.data / new.data
+        window = backend.pad(state.xi, split.field_shape, (0, 0))
+        backend.axpy(1.0 - keep, window, state.hv, out=state.hv)
+        backend.scale(keep, state.xi, out=state.xi)
+    ratios = {axis: old.tv_along(axis) / new.tv_along(axis) for axis in split.axes}
+    if any(ratio != 1.0 for ratio in ratios.values()):
+        split.rescale_tv_duals(state, ratios)
+    if new.nonneg != old.nonneg:
+        backend.scale(old.nonneg / new.nonneg, state.rho, out=state.rho)
+        backend.axpy(new.nonneg - old.nonneg, state.w, state.rest, out=state.rest)
     split.set_penalties(new)
     state.penalties = new
     return new

@@ -3,7 +3,7 @@ the calibration's terms (built once per solver and kept in its shared store) and
 problem's scales the penalties are set from."""
 from __future__ import annotations
 
-from dataclasses import astuple, dataclass, fields
+from dataclasses import astuple, dataclass, fields, replace
 
 import numpy as np
 
@@ -25,6 +25,10 @@ class Penalties:
     def tv_along(self, axis: int) -> float:
         """μ₂,d."""
         return self.tv if self.tv_balance is None else self.tv * self.tv_balance[axis]
+
+    def scaled(self, factor: float) -> "Penalties":
+        """Every penalty times ``factor`` (the β_d kept)."""
+        return replace(self, data=self.data * factor, tv=self.tv * factor, nonneg=self.nonneg * factor)
 
 
 @dataclass
