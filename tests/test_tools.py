@@ -512,7 +512,7 @@ def test_bench_answer_replays_the_default_stop_where_the_default_stops(tmp_path,
     """On a two-scene panel at 32×40×8, with the cap at 1080 (a window's end): a two-point scene, point-like with a
     few lit voxels, whose narrowed stop runs to the cap, and a sixteen-source scene, not point-like at this size,
     whose widened stop converges before it. On each the replayed stop at the default's own tolerance ends where a
-    default solve of the scene ends, with its cube's PSNR; the answer is the last mark; "needs" is the widest grid
+    default solve of the scene ends, with its cube's PSNR (and the probe's noise); the answer is the last mark; "needs" is the widest grid
     tolerance whose stop is within; the cap ends a stop whose estimate falls only after it; a trajectory too short
     to read the drift is refused."""
     for module in (settings, bench_answer):
@@ -526,7 +526,7 @@ def test_bench_answer_replays_the_default_stop_where_the_default_stops(tmp_path,
         sim = bench_panel.panel_scene({k: scene[k] for k in ("kind", "level", "seed")}, (32, 40), 8)
         own = Solver(sim.calibration).solve(sim.measurement)
         marks, default = scene["marks"], scene["default"]
-        assert default["tolerance"] == own.attrs["stop_tolerance"]
+        assert default["tolerance"] == own.attrs["stop_tolerance"] and scene["noise"] == own.attrs["noise_estimate"]
         assert (default["iteration"], default["converged"]) == (own.iterations, own.stop_reason == "converged")
         assert default["short_db"] == pytest.approx(scene["answer"]["psnr"] - psnr(own.cube, sim.truth), abs=1e-9)
         assert scene["answer"]["psnr"] == marks[-1]["psnr"] and marks[-1]["iteration"] == 1080

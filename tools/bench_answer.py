@@ -70,7 +70,8 @@ def run_scene(plan: dict, args) -> dict:
     default = auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points)
     return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
             "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
-            "noise": attrs["noise_estimate"], "answer": {"psnr": answer["psnr"], "angle": answer["angle"], "drift_db": answer["psnr"] - before["psnr"],
+            "noise": attrs["noise_estimate"],
+            "answer": {"psnr": answer["psnr"], "angle": answer["angle"], "drift_db": answer["psnr"] - before["psnr"],
                        "drift_deg": answer["angle"] - before["angle"]},
             "default": stop(points, answer, default), "stops": [stop(points, answer, t) for t in args.tolerances],
             "needs": next((s for s in (stop(points, answer, t) for t in GRID) if s["within"]), None),
