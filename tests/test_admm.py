@@ -324,7 +324,8 @@ def test_new_penalties_leave_the_fixed_point_where_it_is(tiny, penalty):
         getattr(stale, name)[...] = getattr(state, name)
     fresh, _ = split.start(at)
     for s in (state, stale, fresh):
-        split.iterate(s)
+        for _ in range(3):                      # a dual reaches w one iteration after it enters the right-hand side
+            split.iterate(s)
     assert moved(state) < 1e-10 and moved(stale) > 1e-4 and moved(fresh) > 1e-4
 
 

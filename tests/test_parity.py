@@ -492,6 +492,9 @@ def test_admm_splits_tv_adjoint_and_division_match_numpy(dtype, axes, path):
         old = split.penalties
         repenalise(split, state, be, replace(old.scaled(0.5), nonneg=0.3 * old.nonneg))
     assert_states_match(ref, got, backend, tolerance)
+    numbers = [flat_numbers(split.splits(state, RELAXATION)) for split, state in zip(pair, (ref, got))]
+    assert np.allclose(numbers[1], numbers[0], rtol=tolerance, atol=0)          # the splits under the new penalties
+    assert_states_match(ref, got, backend, tolerance)
 
 
 def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_memory):
