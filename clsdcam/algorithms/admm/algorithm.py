@@ -47,9 +47,9 @@ NONNEG_POINT_LIKE = 3e-3
 # for a few points")
 NONNEG_FEW_POINTS = 1e-3
 # and on a scene of a few points in good light, every penalty times LIGHTER_FEW_POINTS (μ₁ and μ₃ halved; the balance
-# then sets μ₂,d from the thresholds): two standard-light sixteen-source scenes the 3000-iteration cap held 0.5 and
-# 1.0 dB short of their answer (128×160, 160×192) come within it, a fresh 144×176 panel stops in 9 % fewer iterations
-# and the 96×112 tuning scenes in 15 % more, all within; in low light the same change cost iterations
+# then sets μ₂,d from the thresholds): the three standard-light sixteen-source scenes the 3000-iteration cap held
+# 0.4–1.0 dB short of their answer (112×144 to 160×192) come within it, a fresh 144×176 panel stops in 9 % fewer
+# iterations and the 96×112 tuning scenes in 15 % more, all within; in low light the same change cost iterations
 # (docs/convergence.md, "Halved penalties for a few points in good light"). Good light is the probe's noise σ̂ under
 # GOOD_LIGHT_BELOW of max|b|: 0.0022–0.0044 on the simulator's standard-light points and sources (96×112 to
 # 160×192), 0.0057–0.0106 in its low light
