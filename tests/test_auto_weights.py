@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from clsdcam.algorithms.admm import Admm, balance
-from clsdcam.algorithms.admm.algorithm import NONNEG, NONNEG_FEW_POINTS, TV
+from clsdcam.algorithms.admm.algorithm import GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS, NONNEG, NONNEG_FEW_POINTS, TV
 from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
@@ -70,6 +70,7 @@ class Residual:
     def point_like(self, few_points, noise):
         self.told_point_like += 1
         self.told_few_points, self.told_noise = few_points, noise
+        return "stand-in: told"
 
 
 def test_act_chooses_from_the_noise_and_rescores():
@@ -132,8 +133,8 @@ def test_an_algorithm_without_a_threshold_is_never_point_like():
 def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monkeypatch):
     """Through the solver: ADMM's 30-iteration cube (the sensor window it returns) is what ``mean_over_peak`` reads,
     three lit voxels in good light count as point-like and take the lighter weight, and ADMM its point-like
-    non-negativity penalty, and, a scene of a few points, the balance after the probe its wider thresholds; FISTA
-    reads nothing."""
+    non-negativity penalty (halved with the rest in good light), and, a scene of a few points, the balance after the
+    probe its wider thresholds, the solve's notes saying so; FISTA reads nothing."""
     cube = np.zeros((8, 48, 64), np.float32)
     for band, y, x in ((1, 20, 20), (4, 30, 40), (6, 15, 45)):
         cube[band, y, x] = 1.0
@@ -146,6 +147,9 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monk
     assert rule.for_noise(noise, True) < 0.5 * rule.for_noise(noise)
     penalties = admm.state.carry[0].penalties          # μ₂ and μ₃ share their scale (penalties_for)
     assert penalties.nonneg / penalties.tv == pytest.approx(NONNEG_FEW_POINTS / TV, rel=1e-12)   # a few points
+    said = f"admm: μ₃ × {NONNEG_FEW_POINTS / NONNEG:g}, wider TV thresholds (a scene of a few points)"
+    lighter = f"every penalty × {LIGHTER_FEW_POINTS:g} in good light"
+    assert said in admm.attrs["skips"] and (lighter in admm.attrs["skips"]) == (noise < GOOD_LIGHT_BELOW)
     told, real = [], balance.balance
     monkeypatch.setattr(balance, "balance", lambda *a: told.append(a[3]) or real(*a))
     reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT + 1, algorithm="admm")
@@ -178,11 +182,12 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tol
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
     point-like threshold, CONVERGE below it, CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
     pixel (n/(H·W)); a note says so where it moved. The algorithm hears whether a point-like scene is one of a few
-    points (None: not told), and the noise the probe read."""
+    points (None: not told), and the noise the probe read; what it says back is noted."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)
     assert stand_in.told_few_points is few_points
     assert few_points is None or stand_in.told_noise == weights.chosen["noise_estimate"] == pytest.approx(0.003, 0.05)
+    assert ("stand-in: told" in stand_in.notes) == (few_points is not None)      # what the algorithm said, noted
     assert stand_in.rules.converge == pytest.approx(tolerance, rel=1e-12)
     assert weights.chosen["lit_voxels"] == pytest.approx(cube.sum() / cube.max() if cube.any() else cube.size)
     pixels = cube.shape[1] * cube.shape[2]

@@ -106,7 +106,7 @@ class AutoWeights:
         self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)
         if point_like:
-            driver.algorithm.point_like(few_points, noise)
+            driver.note(driver.algorithm.point_like(few_points, noise))
         if self.wide_stop and "mean_over_peak" in self.chosen:
             self._tune_stop(driver, point_like, few_points)
 

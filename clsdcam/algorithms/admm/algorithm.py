@@ -156,22 +156,28 @@ class Admm(Algorithm):
             return
         self.state, _ = self.splitting.start(point)
 
-    def point_like(self, few_points: bool = False, noise: float | None = None) -> None:
+    def point_like(self, few_points: bool = False, noise: float | None = None) -> str | None:
         """The scene is point-like (the auto weights' probe, :mod:`clsdcam.solve.auto_weights`): μ₃ from ``NONNEG`` to
         ``NONNEG_POINT_LIKE`` of the same scale, or ``NONNEG_FEW_POINTS`` on a scene of ``few_points``, and there in
         good light (the probe's ``noise`` under GOOD_LIGHT_BELOW) every penalty then LIGHTER_FEW_POINTS of itself, the
         solve going on from the same point (:func:`.balance.repenalise`); on a scene of a few points the TV balance
-        still to come sets wider thresholds, and may set lower penalties (:mod:`.balance`)."""
+        still to come sets wider thresholds, and may set lower penalties (:mod:`.balance`). Returns the line that
+        says so (None before the first iteration, when only the balance is told)."""
         self._few_points = few_points
-        if self.state is not None:
-            from .balance import repenalise
+        if self.state is None:
+            return None
+        from .balance import repenalise
 
-            constant = NONNEG_FEW_POINTS if few_points else NONNEG_POINT_LIKE
-            old = self.splitting.penalties
-            new = replace(old, nonneg=old.nonneg * constant / NONNEG)
-            if few_points and noise is not None and noise < GOOD_LIGHT_BELOW:
-                new = new.scaled(LIGHTER_FEW_POINTS)
-            repenalise(self.splitting, self.state, self.backend, new)
+        factor = (NONNEG_FEW_POINTS if few_points else NONNEG_POINT_LIKE) / NONNEG
+        old = self.splitting.penalties
+        new = replace(old, nonneg=old.nonneg * factor)
+        said = (f"admm: μ₃ × {factor:g}, wider TV thresholds (a scene of a few points)" if few_points
+                else f"admm: μ₃ × {factor:g} (a point-like scene)")
+        if few_points and noise is not None and noise < GOOD_LIGHT_BELOW:
+            new = new.scaled(LIGHTER_FEW_POINTS)
+            said += f"; every penalty × {LIGHTER_FEW_POINTS:g} in good light (noise {noise:.2g} < {GOOD_LIGHT_BELOW:g})"
+        repenalise(self.splitting, self.state, self.backend, new)
+        return said
 
     def carry(self):
         """What the next frame's solve resumes from: the splits and duals (None before the first iteration)."""
