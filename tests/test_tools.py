@@ -512,9 +512,9 @@ def test_bench_answer_replays_the_default_stop_where_the_default_stops(tmp_path,
     """On a two-scene panel at 32×40×8, with the cap at 1080 (a window's end): a two-point scene, point-like with a
     few lit voxels, whose narrowed stop runs to the cap, and a sixteen-source scene, not point-like at this size,
     whose widened stop converges before it. On each the replayed stop at the default's own tolerance ends where a
-    default solve of the scene ends, with its cube's PSNR (and the probe's noise); the answer is the last mark; "needs" is the widest grid
-    tolerance whose stop is within; the cap ends a stop whose estimate falls only after it; a trajectory too short
-    to read the drift is refused."""
+    default solve of the scene ends, with its cube's PSNR (and the probe's noise); the answer is the last mark;
+    "needs" is the widest grid tolerance whose stop is within; the cap ends a stop whose estimate falls only after
+    it; a trajectory too short to read the drift is refused."""
     for module in (settings, bench_answer):
         monkeypatch.setattr(module, "AUTO_CAP", 1080)
     args = ["--size", "32x40", "--bands", "8", "--scenes", "2", "--kinds", "points,sources", "--seed", "5",
