@@ -45,24 +45,28 @@ def difference(v: np.ndarray, axis: int, out: np.ndarray, below=None) -> np.ndar
 def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarray, above=None,
                            scratch: dict | None = None) -> np.ndarray:
     """out += scale·D_dᵀu: (D_dᵀu)[i] = u[i − 1] − u[i] (along λ u[−1] = 0 and u[K−1] unused; along y the row
-    ``above`` the first one may be given, a block of a cube's rows; else circular). Along x, scale·u[i − 1] is
-    formed whole (each plane's rows as one run, the first column's then put right) and added in one pass."""
-    n = u.shape[axis]
-    if axis == 0:
-        out[_along(0, slice(0, n - 1))] -= scale * u[_along(0, slice(0, n - 1))]
-        out[_along(0, slice(1, n))] += scale * u[_along(0, slice(0, n - 1))]
-        return out
-    out -= scale * u
+    ``above`` the first one may be given, a block of a cube's rows; else circular). scale·u is formed once, in
+    the precision scale·u has (a float64 scale: float64), and subtracted and added shifted. Along x it is formed
+    one element into each plane's run of rows, so that the run shifted by one is a view: after the subtraction,
+    each row's first element there is put right (the row's last, circularly) and the whole run added in one pass."""
+    k, n = u.shape[0], u.shape[axis]
+    dtype = np.result_type(u, scale)
     if axis == 2:
-        dtype = np.result_type(u, scale)           # as scale·u would be (a float64 scale: formed in float64)
-        shifted = np.empty(u.shape, dtype) if scratch is None else scratch_buffer(scratch, "shifted", u.shape, dtype)
-        np.multiply(_rows_run(u)[:, :-1], scale, out=_rows_run(shifted)[:, 1:])
-        np.multiply(u[..., n - 1], scale, out=shifted[..., 0])
-        out += shifted
+        runs = np.empty((k, u[0].size + 1), dtype) if scratch is None else scratch_buffer(
+            scratch, "scaled runs", (k, u[0].size + 1), dtype)
+        out -= np.multiply(u, scale, out=runs[:, 1:].reshape(u.shape))
+        runs[:, 0:-1:n] = runs[:, n::n]
+        out += runs[:, :-1].reshape(u.shape)
         return out
-    out[_along(axis, slice(1, n))] += scale * u[_along(axis, slice(0, n - 1))]
-    before = u[_along(axis, n - 1)] if above is None else above
-    out[_along(axis, 0)] += scale * before
+    scaled = np.multiply(u, scale, out=np.empty(u.shape, dtype) if scratch is None else scratch_buffer(
+        scratch, "scaled", u.shape, dtype))
+    if axis == 0:
+        out[:n - 1] -= scaled[:n - 1]
+        out[1:] += scaled[:n - 1]
+        return out
+    out -= scaled
+    out[:, 1:] += scaled[:, :n - 1]
+    out[:, 0] += scaled[:, n - 1] if above is None else scale * above
     return out
 
 
