@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from clsdcam.algorithms.admm import Admm, balance
-from clsdcam.algorithms.admm.algorithm import GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS, NONNEG, NONNEG_FEW_POINTS, TV
+from clsdcam.algorithms.admm.algorithm import (GOOD_LIGHT_BELOW, HALVED_FROM_PER_PIXEL, LIGHTER_FEW_POINTS, NONNEG,
+                                              NONNEG_FEW_POINTS, TV)
 from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, AutoWeights
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
@@ -67,9 +68,9 @@ class Residual:
     def note(self, *lines):
         self.notes += lines
 
-    def point_like(self, few_points, noise):
+    def point_like(self, few_points, noise, lit_per_pixel):
         self.told_point_like += 1
-        self.told_few_points, self.told_noise = few_points, noise
+        self.told_few_points, self.told_noise, self.told_lit_per_pixel = few_points, noise, lit_per_pixel
         return "stand-in: told"
 
 
@@ -133,8 +134,9 @@ def test_an_algorithm_without_a_threshold_is_never_point_like():
 def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monkeypatch):
     """Through the solver: ADMM's 30-iteration cube (the sensor window it returns) is what ``mean_over_peak`` reads,
     three lit voxels in good light count as point-like and take the lighter weight, and ADMM its point-like
-    non-negativity penalty (halved with the rest in good light), and, a scene of a few points, the balance after the
-    probe its wider thresholds, the solve's notes saying so; FISTA reads nothing."""
+    non-negativity penalty (halved with the rest in good light, but not on so few lit voxels a pixel), and, a scene
+    of a few points, the balance after the probe its wider thresholds, the solve's notes saying so; FISTA reads
+    nothing."""
     cube = np.zeros((8, 48, 64), np.float32)
     for band, y, x in ((1, 20, 20), (4, 30, 40), (6, 15, 45)):
         cube[band, y, x] = 1.0
@@ -149,7 +151,8 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monk
     assert penalties.nonneg / penalties.tv == pytest.approx(NONNEG_FEW_POINTS / TV, rel=1e-12)   # a few points
     said = f"admm: μ₃ × {NONNEG_FEW_POINTS / NONNEG:g}, wider TV thresholds (a scene of a few points)"
     lighter = f"every penalty × {LIGHTER_FEW_POINTS:g} in good light"
-    assert said in admm.attrs["skips"] and (lighter in admm.attrs["skips"]) == (noise < GOOD_LIGHT_BELOW)
+    halved = noise < GOOD_LIGHT_BELOW and admm.attrs["lit_per_pixel"] >= HALVED_FROM_PER_PIXEL
+    assert said in admm.attrs["skips"] and (lighter in admm.attrs["skips"]) == halved
     told, real = [], balance.balance
     monkeypatch.setattr(balance, "balance", lambda *a: told.append(a[3]) or real(*a))
     reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT + 1, algorithm="admm")
@@ -182,11 +185,12 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tol
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
     point-like threshold, CONVERGE below it, CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
     pixel (n/(H·W)); a note says so where it moved. The algorithm hears whether a point-like scene is one of a few
-    points (None: not told), and the noise the probe read; what it says back is noted."""
+    points (None: not told), and the noise and lit voxels a pixel the probe read; what it says back is noted."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)
     assert stand_in.told_few_points is few_points
     assert few_points is None or stand_in.told_noise == weights.chosen["noise_estimate"] == pytest.approx(0.003, 0.05)
+    assert few_points is None or stand_in.told_lit_per_pixel == weights.chosen["lit_per_pixel"]
     assert ("stand-in: told" in stand_in.notes) == (few_points is not None)      # what the algorithm said, noted
     assert stand_in.rules.converge == pytest.approx(tolerance, rel=1e-12)
     assert weights.chosen["lit_voxels"] == pytest.approx(cube.sum() / cube.max() if cube.any() else cube.size)

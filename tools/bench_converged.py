@@ -114,13 +114,15 @@ def scene_weight(sim, weight_from: str) -> tuple[float, dict]:
     weight_run, _ = timed_solve(sim, TODAY if weight_from == "today" else {})
     point_like, few_points = probe_reading(weight_run.attrs, POINT_LIKE_BELOW)
     return float(weight_run.attrs["tv_chosen"]), {"point_like": point_like, "few_points": few_points,
-                                                  "noise": weight_run.attrs.get("noise_estimate")}
+                                                  "noise": weight_run.attrs.get("noise_estimate"),
+                                                  "lit_per_pixel": weight_run.attrs.get("lit_per_pixel")}
 
 
 @contextmanager
-def told_point_like(point_like: bool = False, few_points: bool = False, noise: float | None = None):
+def told_point_like(point_like: bool = False, few_points: bool = False, noise: float | None = None,
+                    lit_per_pixel: float | None = None):
     """While it lasts, where ``point_like``, every ADMM solve is told so before its iteration AUTO_AT + 1 (and
-    whether the scene is ``few_points``, and the probe's ``noise``), as the default's probe tells it
+    whether the scene is ``few_points``, the probe's ``noise`` and ``lit_per_pixel``), as the default's probe tells it
     (``Admm.point_like``): a run at a given weight reads no probe, so without this it would keep the penalties of the
     spread scenes where the default's change. Only for solves at a given weight: a solve with ``--tv auto`` reads its
     own probe and would be told twice."""
@@ -130,7 +132,7 @@ def told_point_like(point_like: bool = False, few_points: bool = False, noise: f
 
     def iterate(algorithm, problem):
         if algorithm._iterations == AUTO_AT:
-            algorithm.point_like(few_points, noise)
+            algorithm.point_like(few_points, noise, lit_per_pixel)
         return plain(algorithm, problem)
 
     Admm.iterate = iterate if point_like else plain

@@ -26,14 +26,16 @@ point-like ones need 0.05 ("The stop widened where the scene is not point-like")
 voxels is n = sum(v)/max(v) (p times the window's voxels); on a point-like scene where n over the window's H·W
 pixels (p·K) is under ``FEW_POINTS_PER_PIXEL``, the tolerance narrows to
 
-    D = ``FEW_POINTS_STOP``·0.05 = 0.01:
+    D = ``FEW_POINTS_STOP``·0.05 = 0.02:
 
 so few unknowns are fixed so well by the measurement that a small distance is a large loss of PSNR. With ADMM's
 penalties for a few points (:meth:`clsdcam.algorithms.admm.algorithm.Admm.point_like`) the simulator's two-point and
 sixteen-source scenes come within 0.2 dB and 0.5° of the answer their own run converges to at tolerances of
 0.023–0.05 whatever their count ("Lighter penalties for a few points"), where under the earlier penalties they
 needed 0.0011–0.05 and the stop narrowed as 0.05·(n/500)². The wider of that square and 0.01 was tried: it stopped
-a fresh sixteen-source scene of 402 lit voxels 1.14 dB short of its answer. On small sensors, where a few points
+a fresh sixteen-source scene of 402 lit voxels 1.14 dB short of its answer. With every penalty halved in good light
+the sixteen-source scenes need 0.02–0.05, but halved two-point scenes needed 0.01, which is why those are not halved
+("A wider stop for a few points, and two points unhalved"; 0.01 before it). On small sensors, where a few points
 light enough of the frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no
 auto weight, or an algorithm without a threshold) the tolerance stays.
 
@@ -54,9 +56,9 @@ AUTO_AT = 30               # auto weights are chosen from the noise of this iter
 # counted per pixel")
 FEW_POINTS_PER_PIXEL = 0.04
 # --converge auto on a scene of a few points, as a share of --converge: the simulator's few-point scenes need 0.023–0.05
-# with ADMM's penalties for them; 0.01 keeps twice the margin over the narrowest (docs/convergence.md, "Lighter
-# penalties for a few points")
-FEW_POINTS_STOP = 0.2
+# with ADMM's penalties for them (docs/convergence.md, "Lighter penalties for a few points"), its halved sixteen-source
+# scenes 0.02–0.05 ("A wider stop for a few points, and two points unhalved"; 0.01, a fifth, before)
+FEW_POINTS_STOP = 0.4
 
 
 def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool]:
@@ -106,7 +108,7 @@ class AutoWeights:
         self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)
         if point_like:
-            driver.note(driver.algorithm.point_like(few_points, noise))
+            driver.note(driver.algorithm.point_like(few_points, noise, self.chosen["lit_per_pixel"]))
         if self.wide_stop and "mean_over_peak" in self.chosen:
             self._tune_stop(driver, point_like, few_points)
 
