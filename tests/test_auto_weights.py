@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 from clsdcam.algorithms.admm import Admm, balance
-from clsdcam.algorithms.admm.algorithm import (GOOD_LIGHT_BELOW, HALVED_FROM_PER_PIXEL, LIGHTER_FEW_POINTS, NONNEG,
-                                              NONNEG_FEW_POINTS, TV)
-from clsdcam.solve.auto_weights import AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, AutoWeights
+from clsdcam.algorithms.admm.algorithm import LIGHTER_FEW_POINTS, NONNEG, NONNEG_FEW_POINTS, TV
+from clsdcam.solve.auto_weights import (AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, FEWEST_POINTS_PER_PIXEL,
+                                        GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS_STOP, AutoWeights, auto_tolerance,
+                                        probe_reading)
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.sim import simulate
@@ -68,9 +69,9 @@ class Residual:
     def note(self, *lines):
         self.notes += lines
 
-    def point_like(self, few_points, noise, lit_per_pixel):
+    def point_like(self, few_points, lighter):
         self.told_point_like += 1
-        self.told_few_points, self.told_noise, self.told_lit_per_pixel = few_points, noise, lit_per_pixel
+        self.told_few_points, self.told_lighter = few_points, lighter
         return "stand-in: told"
 
 
@@ -150,8 +151,8 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monk
     penalties = admm.state.carry[0].penalties          # μ₂ and μ₃ share their scale (penalties_for)
     assert penalties.nonneg / penalties.tv == pytest.approx(NONNEG_FEW_POINTS / TV, rel=1e-12)   # a few points
     said = f"admm: μ₃ × {NONNEG_FEW_POINTS / NONNEG:g}, wider TV thresholds (a scene of a few points)"
-    lighter = f"every penalty × {LIGHTER_FEW_POINTS:g} in good light"
-    halved = noise < GOOD_LIGHT_BELOW and admm.attrs["lit_per_pixel"] >= HALVED_FROM_PER_PIXEL
+    lighter = f"every penalty × {LIGHTER_FEW_POINTS:g} (in good light, not of the fewest points)"
+    halved = noise < GOOD_LIGHT_BELOW and admm.attrs["lit_per_pixel"] >= FEWEST_POINTS_PER_PIXEL
     assert said in admm.attrs["skips"] and (lighter in admm.attrs["skips"]) == halved
     told, real = [], balance.balance
     monkeypatch.setattr(balance, "balance", lambda *a: told.append(a[3]) or real(*a))
@@ -160,6 +161,22 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monk
     fista = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="fista")
     assert "mean_over_peak" not in fista.attrs
     assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))
+
+
+@pytest.mark.parametrize("noise, per_pixel, lighter", [
+    (0.99 * GOOD_LIGHT_BELOW, FEWEST_POINTS_PER_PIXEL, True),
+    (1.01 * GOOD_LIGHT_BELOW, FEWEST_POINTS_PER_PIXEL, False),          # low light
+    (0.99 * GOOD_LIGHT_BELOW, 0.99 * FEWEST_POINTS_PER_PIXEL, False),   # the fewest points
+])
+def test_a_few_points_are_lightened_in_good_light_unless_they_are_the_fewest(noise, per_pixel, lighter):
+    """The probe's third reading, at its two gates, and the stop it sets on a scene of a few points:
+    CONVERGE·LIGHTER_FEW_POINTS_STOP where it holds, CONVERGE·FEW_POINTS_STOP where not; a scene that is not a few
+    points is never lightened."""
+    attrs = {"mean_over_peak": 0.0001, "lit_per_pixel": per_pixel, "noise_estimate": noise}
+    assert probe_reading(attrs, 0.0025) == (True, True, lighter)
+    assert probe_reading({**attrs, "lit_per_pixel": FEW_POINTS_PER_PIXEL}, 0.0025) == (True, False, False)
+    share = LIGHTER_FEW_POINTS_STOP if lighter else FEW_POINTS_STOP
+    assert auto_tolerance(CONVERGE, CONVERGE_WIDE, True, True, lighter) == pytest.approx(CONVERGE * share, rel=1e-12)
 
 
 def lit_voxels(n: int, shape=(4, 128, 128)) -> np.ndarray:
@@ -173,7 +190,8 @@ MANY = (32, 128, 128)     # 0.04 lit voxels a pixel: 655.36 of these, point-like
 
 @pytest.mark.parametrize("cube, tolerance, said, few_points", [
     (lit_voxels(656, MANY), CONVERGE, None, False),     # point-like, not a few points: CONVERGE
-    (lit_voxels(655, MANY), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 655, 0.03998 a pixel < 0.04", True),
+    (lit_voxels(655, MANY), CONVERGE * LIGHTER_FEW_POINTS_STOP, "few lit voxels: 655, 0.03998 a pixel < 0.04; in good "
+     "light, noise 0.003 < 0.005, and not of the fewest, ≥ 0.012 a pixel", True),
     (lit_voxels(93, (32, 48, 48)), CONVERGE, None, False),    # under 500 lit voxels, over 0.04 a pixel: not a few
     (lit_voxels(120), CONVERGE * FEW_POINTS_STOP, "a point-like scene of few lit voxels: 120, 0.007324 a pixel < 0.04",
      True),
@@ -185,12 +203,15 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tol
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
     point-like threshold, CONVERGE below it, CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
     pixel (n/(H·W)); a note says so where it moved. The algorithm hears whether a point-like scene is one of a few
-    points (None: not told), and the noise and lit voxels a pixel the probe read; what it says back is noted."""
+    points (None: not told), and whether it is one to lighten (in the probe's good light, σ̂ = 0.003, and not of the
+    fewest, FEWEST_POINTS_PER_PIXEL lit voxels a pixel or more: CONVERGE·LIGHTER_FEW_POINTS_STOP); what it says back
+    is noted."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)
     assert stand_in.told_few_points is few_points
-    assert few_points is None or stand_in.told_noise == weights.chosen["noise_estimate"] == pytest.approx(0.003, 0.05)
-    assert few_points is None or stand_in.told_lit_per_pixel == weights.chosen["lit_per_pixel"]
+    assert weights.chosen["noise_estimate"] == pytest.approx(0.003, 0.05)
+    lighter = bool(few_points) and weights.chosen["lit_per_pixel"] >= FEWEST_POINTS_PER_PIXEL
+    assert few_points is None or stand_in.told_lighter is lighter
     assert ("stand-in: told" in stand_in.notes) == (few_points is not None)      # what the algorithm said, noted
     assert stand_in.rules.converge == pytest.approx(tolerance, rel=1e-12)
     assert weights.chosen["lit_voxels"] == pytest.approx(cube.sum() / cube.max() if cube.any() else cube.size)

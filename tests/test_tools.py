@@ -329,9 +329,9 @@ def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_
     """A solve at a given weight reads no probe: told, ADMM's μ₃ falls to NONNEG_POINT_LIKE/NONNEG of its value
     after AUTO_AT iterations, as the default's does on a point-like scene, and told a few points to
     NONNEG_FEW_POINTS/NONNEG, its TV balance at that iteration taking the wider thresholds; told a few points in good
-    light (noise under GOOD_LIGHT_BELOW) and lit at HALVED_FROM_PER_PIXEL voxels a pixel or more, μ₁ and μ₃ are then
-    LIGHTER_FEW_POINTS of those and the balance sets the same μ₂,d (its thresholds are the iterate's); not told, or
-    before that iteration, or after the context, it keeps its penalties."""
+    light and not of the fewest (``lighter``), μ₁ and μ₃ are then LIGHTER_FEW_POINTS of those and the balance sets
+    the same μ₂,d (its thresholds are the iterate's); not told, or before that iteration, or after the context, it
+    keeps its penalties."""
     from clsdcam.algorithms.admm import algorithm
     from clsdcam.sim import simulate
 
@@ -350,10 +350,8 @@ def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_
     assert few.nonneg == pytest.approx(kept.nonneg * algorithm.NONNEG_FEW_POINTS / algorithm.NONNEG, rel=1e-12)
     assert few.nonneg < point_like.nonneg and point_like.tv_balance == kept.tv_balance
     assert all(f < p for f, p in zip(few.tv_balance, point_like.tv_balance))     # C = 16 against 2: lower penalties
-    light, lit = algorithm.GOOD_LIGHT_BELOW, algorithm.HALVED_FROM_PER_PIXEL
-    assert penalties(AUTO_AT + 2, point_like=True, few_points=True, noise=1.01 * light, lit_per_pixel=lit) == few
-    assert penalties(AUTO_AT + 2, point_like=True, few_points=True, noise=0.99 * light, lit_per_pixel=0.99 * lit) == few
-    bright = penalties(AUTO_AT + 2, point_like=True, few_points=True, noise=0.99 * light, lit_per_pixel=lit)
+    assert penalties(AUTO_AT + 2, point_like=True, few_points=True, lighter=False) == few
+    bright = penalties(AUTO_AT + 2, point_like=True, few_points=True, lighter=True)
     assert bright.data == pytest.approx(few.data * algorithm.LIGHTER_FEW_POINTS, rel=1e-12)
     assert bright.nonneg == pytest.approx(few.nonneg * algorithm.LIGHTER_FEW_POINTS, rel=1e-12)
     assert [bright.tv_along(axis) for axis in range(3)] == pytest.approx([few.tv_along(axis) for axis in range(3)],

@@ -66,8 +66,8 @@ def run_scene(plan: dict, args) -> dict:
     sim = panel_scene(plan, args.size, args.bands)
     attrs, points = default_run(sim, args.iters)
     answer, before = points[-1], next(p for p in points if p["iteration"] >= points[-1]["iteration"] - SETTLED_OVER)
-    point_like, few_points = probe_reading(attrs, POINT_LIKE_BELOW)
-    default = auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points)
+    point_like, few_points, lighter = probe_reading(attrs, POINT_LIKE_BELOW)
+    default = auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points, lighter)
     return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
             "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
             "noise": attrs["noise_estimate"],

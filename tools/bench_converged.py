@@ -112,17 +112,15 @@ def scene_weight(sim, weight_from: str) -> tuple[float, dict]:
     """(τ, probe): the weight today's run (``weight_from`` "today") or the default's ``--tv auto`` chose, and what
     that run's probe tells ADMM, :func:`told_point_like`'s arguments (FISTA's run reads no probe: nothing)."""
     weight_run, _ = timed_solve(sim, TODAY if weight_from == "today" else {})
-    point_like, few_points = probe_reading(weight_run.attrs, POINT_LIKE_BELOW)
+    point_like, few_points, lighter = probe_reading(weight_run.attrs, POINT_LIKE_BELOW)
     return float(weight_run.attrs["tv_chosen"]), {"point_like": point_like, "few_points": few_points,
-                                                  "noise": weight_run.attrs.get("noise_estimate"),
-                                                  "lit_per_pixel": weight_run.attrs.get("lit_per_pixel")}
+                                                  "lighter": lighter}
 
 
 @contextmanager
-def told_point_like(point_like: bool = False, few_points: bool = False, noise: float | None = None,
-                    lit_per_pixel: float | None = None):
+def told_point_like(point_like: bool = False, few_points: bool = False, lighter: bool = False):
     """While it lasts, where ``point_like``, every ADMM solve is told so before its iteration AUTO_AT + 1 (and
-    whether the scene is ``few_points``, the probe's ``noise`` and ``lit_per_pixel``), as the default's probe tells it
+    whether the scene is ``few_points``, and one to make ``lighter``), as the default's probe tells it
     (``Admm.point_like``): a run at a given weight reads no probe, so without this it would keep the penalties of the
     spread scenes where the default's change. Only for solves at a given weight: a solve with ``--tv auto`` reads its
     own probe and would be told twice."""
@@ -132,7 +130,7 @@ def told_point_like(point_like: bool = False, few_points: bool = False, noise: f
 
     def iterate(algorithm, problem):
         if algorithm._iterations == AUTO_AT:
-            algorithm.point_like(few_points, noise, lit_per_pixel)
+            algorithm.point_like(few_points, lighter)
         return plain(algorithm, problem)
 
     Admm.iterate = iterate if point_like else plain

@@ -84,13 +84,12 @@ class Algorithm:
         """Every iterate through ``mapping`` (into another space), momentum kept."""
         raise InputError(f"--algorithm {self.name} runs in band space: no --subspace or --rank")
 
-    def point_like(self, few_points: bool = False, noise: float | None = None,
-                   lit_per_pixel: float | None = None) -> str | None:
+    def point_like(self, few_points: bool = False, lighter: bool = False) -> str | None:
         """The auto weights' probe found the scene point-like (:mod:`clsdcam.solve.auto_weights`), whether it is a
-        scene of ``few_points``, the ``noise`` σ̂ it read (relative to max|b|) and its ``lit_per_pixel``: an algorithm
-        with a setting of its own for such scenes takes it (ADMM: a lighter non-negativity penalty, on a few points
-        wider TV thresholds, and there in good light every penalty lighter, on all but the fewest) and returns a line
-        for the solve's notes that says what it did. Nothing by default (None)."""
+        scene of ``few_points``, and one to make ``lighter`` (a few points in good light, not of the fewest:
+        ``lighter_few_points``): an algorithm with a setting of its own for such scenes takes it (ADMM: a lighter
+        non-negativity penalty, on a few points wider TV thresholds, and every penalty lighter where told) and
+        returns a line for the solve's notes that says what it did. Nothing by default (None)."""
 
     def carry(self):
         """What a video's next frame resumes from besides its iterate (:class:`clsdcam.solve.state.SolverState`), or

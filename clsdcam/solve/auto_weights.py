@@ -17,27 +17,33 @@ blurrier. Below it, a rule with a ``point_noise`` lightens the weight in good li
 a dark iterate counts as p = 1.
 
 Below it, too, the algorithm is told, and whether the scene is one of a few points, fewer than
-``FEW_POINTS_PER_PIXEL`` lit voxels a window pixel (below), with the noise σ̂: ``Algorithm.point_like`` (ADMM
-lightens its non-negativity penalty, on a few points widens its TV thresholds, and there in good light lightens every
-penalty).
+``FEW_POINTS_PER_PIXEL`` lit voxels a window pixel (below), and whether it is one to lighten (below):
+``Algorithm.point_like`` (ADMM lightens its non-negativity penalty, on a few points widens its TV thresholds, and on
+one to lighten lightens every penalty).
 At or above it, the automatic stop may widen its tolerance (``wide_stop``, ``--converge auto``): the scenes the
 probe passes reach the model's answer, within the rules of docs/convergence.md, at a distance of 0.1 where the
 point-like ones need 0.05 ("The stop widened where the scene is not point-like"). The same iterate's count of lit
 voxels is n = sum(v)/max(v) (p times the window's voxels); on a point-like scene where n over the window's H·W
 pixels (p·K) is under ``FEW_POINTS_PER_PIXEL``, the tolerance narrows to
 
-    D = ``FEW_POINTS_STOP``·0.05 = 0.02:
+    D = ``FEW_POINTS_STOP``·0.05 = 0.01:
 
 so few unknowns are fixed so well by the measurement that a small distance is a large loss of PSNR. With ADMM's
 penalties for a few points (:meth:`clsdcam.algorithms.admm.algorithm.Admm.point_like`) the simulator's two-point and
 sixteen-source scenes come within 0.2 dB and 0.5° of the answer their own run converges to at tolerances of
 0.023–0.05 whatever their count ("Lighter penalties for a few points"), where under the earlier penalties they
 needed 0.0011–0.05 and the stop narrowed as 0.05·(n/500)². The wider of that square and 0.01 was tried: it stopped
-a fresh sixteen-source scene of 402 lit voxels 1.14 dB short of its answer. With every penalty halved in good light
-the sixteen-source scenes need 0.02–0.05, but halved two-point scenes needed 0.01, which is why those are not halved
-("A wider stop for a few points, and two points unhalved"; 0.01 before it). On small sensors, where a few points
-light enough of the frame for p to pass the threshold, the stop widens as before. Where the probe does not run (no
-auto weight, or an algorithm without a threshold) the tolerance stays.
+a fresh sixteen-source scene of 402 lit voxels 1.14 dB short of its answer.
+
+The probe's noise σ̂ and count read a third thing: a scene of a few points in good light (σ̂ under
+``GOOD_LIGHT_BELOW`` of max|b|) that is not of the fewest (at least ``FEWEST_POINTS_PER_PIXEL`` lit voxels a window
+pixel), the sixteen sources rather than two points. There ADMM halves its penalties, and the stop is
+``LIGHTER_FEW_POINTS_STOP``·0.05 = 0.02: so halved, the sixteen-source scenes need 0.02–0.05, where the two-point
+scenes, halved, needed 0.01, and one in low light ended 0.25 dB short at 0.02 ("A wider stop for a few points in good
+light").
+
+On small sensors, where a few points light enough of the frame for p to pass the threshold, the stop widens as
+before. Where the probe does not run (no auto weight, or an algorithm without a threshold) the tolerance stays.
 
 Why per pixel: at iteration 30 each point is still spread by the caustic, whose extent grows with the field, so a
 scene's n grows with the sensor: sixteen sources count 173–250 at 96×112, 265–448 at 112×144, 302–621 at 128×160
@@ -56,27 +62,47 @@ AUTO_AT = 30               # auto weights are chosen from the noise of this iter
 # counted per pixel")
 FEW_POINTS_PER_PIXEL = 0.04
 # --converge auto on a scene of a few points, as a share of --converge: the simulator's few-point scenes need 0.023–0.05
-# with ADMM's penalties for them (docs/convergence.md, "Lighter penalties for a few points"), its halved sixteen-source
-# scenes 0.02–0.05 ("A wider stop for a few points, and two points unhalved"; 0.01, a fifth, before)
-FEW_POINTS_STOP = 0.4
+# with ADMM's penalties for them; 0.01 keeps twice the margin over the narrowest (docs/convergence.md, "Lighter
+# penalties for a few points"). A fresh low-light two-point scene needed 0.018 ("A wider stop for a few points in
+# good light")
+FEW_POINTS_STOP = 0.2
+# and on one in good light, not of the fewest (lighter_few_points): the halved sixteen-source scenes are within at
+# 0.02 on 11 of 11 (96×112 to 160×192)
+LIGHTER_FEW_POINTS_STOP = 0.4
+# the noise σ̂ (of max|b|) under which the probe reads good light: 0.0022–0.0044 on the simulator's standard-light
+# points and sources (96×112 to 160×192), 0.0057–0.0106 in its low light
+GOOD_LIGHT_BELOW = 0.005
+# lit voxels a window pixel under which a scene of a few points is of the fewest: the simulator's two-point scenes count
+# 0.003–0.009, its sixteen sources 0.015–0.030 at every size measured
+FEWEST_POINTS_PER_PIXEL = 0.012
 
 
-def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool]:
-    """(point-like, a few points) from the probe's attributes ``mean_over_peak`` (p) and ``lit_per_pixel`` (n/(H·W))
-    of a solve or its result: p below the algorithm's threshold, and then n/(H·W) below FEW_POINTS_PER_PIXEL; (False,
-    False) where the probe did not measure."""
+def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool, bool]:
+    """(point-like, a few points, a few points to lighten) from the probe's attributes ``mean_over_peak`` (p),
+    ``lit_per_pixel`` (n/(H·W)) and ``noise_estimate`` (σ̂) of a solve or its result: p below the algorithm's
+    threshold; then n/(H·W) below FEW_POINTS_PER_PIXEL; then :func:`lighter_few_points`. All False where the probe
+    did not measure."""
     p = attrs.get("mean_over_peak")
     point_like = p is not None and p < point_like_below
-    return point_like, point_like and attrs["lit_per_pixel"] < FEW_POINTS_PER_PIXEL
+    few_points = point_like and attrs["lit_per_pixel"] < FEW_POINTS_PER_PIXEL
+    return point_like, few_points, few_points and lighter_few_points(attrs["noise_estimate"], attrs["lit_per_pixel"])
 
 
-def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: bool) -> float:
+def lighter_few_points(noise: float, lit_per_pixel: float) -> bool:
+    """A scene of a few points read in good light (σ̂ under GOOD_LIGHT_BELOW) and not of the fewest (at least
+    FEWEST_POINTS_PER_PIXEL lit voxels a pixel): ADMM halves its penalties there, and the stop is wider."""
+    return noise < GOOD_LIGHT_BELOW and lit_per_pixel >= FEWEST_POINTS_PER_PIXEL
+
+
+def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: bool, lighter: bool = False) -> float:
     """``--converge auto``'s tolerance from the probe's reading (:func:`probe_reading`, the module docstring):
     ``wide`` on a scene that is not point-like; on a point-like one, FEW_POINTS_STOP·``converge`` on a scene of a
-    few points, else ``converge``."""
+    few points (LIGHTER_FEW_POINTS_STOP· on one to lighten), else ``converge``."""
     if not point_like:
         return wide
-    return converge * FEW_POINTS_STOP if few_points else converge
+    if few_points:
+        return converge * (LIGHTER_FEW_POINTS_STOP if lighter else FEW_POINTS_STOP)
+    return converge
 
 
 class AutoWeights:
@@ -96,27 +122,26 @@ class AutoWeights:
     def act(self, problem, driver) -> None:
         """Choose from the noise σ̂ of the residual at the driver's iterate, noted to its observers; the driver
         rescores under the new F."""
-        noise = residual_noise(problem.backend.to_host(problem.residual(driver.x)))
+        noise = self.chosen["noise_estimate"] = residual_noise(problem.backend.to_host(problem.residual(driver.x)))
         self._measure_likeness(problem, driver.x)
-        point_like, few_points = probe_reading(self.chosen, self.point_like_below)
+        point_like, few_points, lighter = probe_reading(self.chosen, self.point_like_below)
         for prior in (prior for prior in self.priors if prior.auto):
             prior.set_relative(prior.auto_weight.for_noise(noise, point_like))
             prior.auto = False
             driver.note(f"{prior.name}: auto, {prior.relative:.3g} (noise σ ≈ {noise:.3g} of max|b|, from the "
                         f"residual at iteration {driver.iterations}" + ("; a point-like scene" if point_like else "")
                         + ")")
-        self.chosen["noise_estimate"] = noise
         driver.rescore(problem.objective)
         if point_like:
-            driver.note(driver.algorithm.point_like(few_points, noise, self.chosen["lit_per_pixel"]))
+            driver.note(driver.algorithm.point_like(few_points, lighter))
         if self.wide_stop and "mean_over_peak" in self.chosen:
-            self._tune_stop(driver, point_like, few_points)
+            self._tune_stop(driver, point_like, few_points, lighter)
 
-    def _tune_stop(self, driver, point_like: bool, few_points: bool) -> None:
+    def _tune_stop(self, driver, point_like: bool, few_points: bool, lighter: bool) -> None:
         """``--converge auto`` from the probe's reading (:func:`probe_reading`, the module docstring): widened on a
-        scene that is not point-like, narrowed on a scene of a few points; said in a note."""
+        scene that is not point-like, narrowed on a scene of a few points (less on one to lighten); said in a note."""
         p, n, per_pixel = (self.chosen[name] for name in ("mean_over_peak", "lit_voxels", "lit_per_pixel"))
-        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points)
+        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points, lighter)
         if not point_like:
             driver.widen_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "
@@ -124,7 +149,9 @@ class AutoWeights:
         elif few_points:
             driver.narrow_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a point-like scene of few lit voxels: "
-                        f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g})")
+                        f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g}" + (
+                            f"; in good light, noise {self.chosen['noise_estimate']:.2g} < {GOOD_LIGHT_BELOW:g}, and "
+                            f"not of the fewest, ≥ {FEWEST_POINTS_PER_PIXEL:g} a pixel" if lighter else "") + ")")
 
     def _measure_likeness(self, problem, x) -> None:
         """The iterate's window's p = mean/max, kept as the attribute ``mean_over_peak``, n = p times the window's

@@ -13,7 +13,8 @@ iterate's differences, once (:mod:`.balance`); where the auto weights' probe fin
 iteration), the non-negativity split's drops to ``NONNEG_POINT_LIKE``, and on a scene of a few points to
 ``NONNEG_FEW_POINTS`` while the balance widens its thresholds; on a scene of a few points in good light (the probe's
 noise σ̂ under ``GOOD_LIGHT_BELOW`` of max|b|) every penalty is then ``LIGHTER_FEW_POINTS`` of itself, unless
-the scene is fewer points still, under ``HALVED_FROM_PER_PIXEL`` lit voxels a window pixel (:meth:`Admm.point_like`).
+the scene is of the fewest points, under ``FEWEST_POINTS_PER_PIXEL`` lit voxels a window pixel (both the probe's:
+:func:`clsdcam.solve.auto_weights.lighter_few_points`; :meth:`Admm.point_like`).
 
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
@@ -52,13 +53,11 @@ NONNEG_FEW_POINTS = 1e-3
 # iterations and the 96×112 tuning scenes in 15 % more, all within; in low light the same change cost iterations
 # (docs/convergence.md, "Halved penalties for a few points in good light"). Good light is the probe's noise σ̂ under
 # GOOD_LIGHT_BELOW of max|b|: 0.0022–0.0044 on the simulator's standard-light points and sources (96×112 to
-# 160×192), 0.0057–0.0106 in its low light. Not below HALVED_FROM_PER_PIXEL lit voxels a window pixel (the probe's
-# count): the simulator's two-point scenes (0.003–0.009 a pixel; its sixteen sources 0.015–0.030) needed a stop at
-# 0.01 halved, at 0.015 two of five ended 0.27–0.30 dB short of their answer, and unhalved they need 0.02 at most
-# (docs/convergence.md, "A wider stop for a few points, and two points unhalved")
+# 160×192), 0.0057–0.0106 in its low light (clsdcam.solve.auto_weights.lighter_few_points). Not on the fewest, under
+# FEWEST_POINTS_PER_PIXEL lit voxels a window pixel: the simulator's two-point scenes, halved, needed a stop at 0.01
+# (at 0.015 two of five ended 0.27–0.30 dB short of their answer), and unhalved they come within 7 % sooner
+# (docs/convergence.md, "A wider stop for a few points in good light")
 LIGHTER_FEW_POINTS = 0.5
-GOOD_LIGHT_BELOW = 0.005
-HALVED_FROM_PER_PIXEL = 0.012
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
 # mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64
 # panels' lines scenes, 0.0035–0.21 on their other 80 (docs/convergence.md, "A lighter weight for point-like scenes")
@@ -160,15 +159,14 @@ class Admm(Algorithm):
             return
         self.state, _ = self.splitting.start(point)
 
-    def point_like(self, few_points: bool = False, noise: float | None = None,
-                   lit_per_pixel: float | None = None) -> str | None:
+    def point_like(self, few_points: bool = False, lighter: bool = False) -> str | None:
         """The scene is point-like (the auto weights' probe, :mod:`clsdcam.solve.auto_weights`): μ₃ from ``NONNEG`` to
-        ``NONNEG_POINT_LIKE`` of the same scale, or ``NONNEG_FEW_POINTS`` on a scene of ``few_points``, and there in
-        good light (the probe's ``noise`` under GOOD_LIGHT_BELOW) with at least HALVED_FROM_PER_PIXEL lit voxels a
-        window pixel (its ``lit_per_pixel``) every penalty then LIGHTER_FEW_POINTS of itself, the solve going on from
-        the same point (:func:`.balance.repenalise`); on a scene of a few points the TV balance still to come sets
-        wider thresholds, and may set lower penalties (:mod:`.balance`). Returns the line that says so (None before
-        the first iteration, when only the balance is told)."""
+        ``NONNEG_POINT_LIKE`` of the same scale, or ``NONNEG_FEW_POINTS`` on a scene of ``few_points``, and on one to
+        make ``lighter`` (in good light, not of the fewest: ``lighter_few_points``) every penalty then
+        LIGHTER_FEW_POINTS of itself, the solve going on from the same point (:func:`.balance.repenalise`); on a scene
+        of a few points the TV balance still to come sets wider thresholds, and may set lower penalties
+        (:mod:`.balance`). Returns the line that says so (None before the first iteration, when only the balance is
+        told)."""
         self._few_points = few_points
         if self.state is None:
             return None
@@ -179,11 +177,9 @@ class Admm(Algorithm):
         new = replace(old, nonneg=old.nonneg * factor)
         said = (f"admm: μ₃ × {factor:g}, wider TV thresholds (a scene of a few points)" if few_points
                 else f"admm: μ₃ × {factor:g} (a point-like scene)")
-        if few_points and noise is not None and noise < GOOD_LIGHT_BELOW:
-            if lit_per_pixel is not None and lit_per_pixel >= HALVED_FROM_PER_PIXEL:
-                new = new.scaled(LIGHTER_FEW_POINTS)
-                said += (f"; every penalty × {LIGHTER_FEW_POINTS:g} in good light (noise {noise:.2g} < "
-                         f"{GOOD_LIGHT_BELOW:g}, {lit_per_pixel:.2g} lit voxels a pixel ≥ {HALVED_FROM_PER_PIXEL:g})")
+        if few_points and lighter:
+            new = new.scaled(LIGHTER_FEW_POINTS)
+            said += f"; every penalty × {LIGHTER_FEW_POINTS:g} (in good light, not of the fewest points)"
         repenalise(self.splitting, self.state, self.backend, new)
         return said
 
