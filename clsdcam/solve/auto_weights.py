@@ -67,13 +67,13 @@ FEW_POINTS_PER_PIXEL = 0.04
 # good light")
 FEW_POINTS_STOP = 0.2
 # and on one in good light, not of the fewest (lighter_few_points): the halved sixteen-source scenes are within at
-# 0.02 on 11 of 11 (96×112 to 160×192)
+# 0.02 on 13 of 13 (96×112 to 160×192; four of them on two fresh panels)
 LIGHTER_FEW_POINTS_STOP = 0.4
 # the noise σ̂ (of max|b|) under which the probe reads good light: 0.0022–0.0044 on the simulator's standard-light
 # points and sources (96×112 to 160×192), 0.0057–0.0106 in its low light
 GOOD_LIGHT_BELOW = 0.005
 # lit voxels a window pixel under which a scene of a few points is of the fewest: the simulator's two-point scenes count
-# 0.003–0.009, its sixteen sources 0.015–0.030 at every size measured
+# 0.003–0.009, its sixteen sources 0.0136–0.030 at every size measured (96×112 to 160×192)
 FEWEST_POINTS_PER_PIXEL = 0.012
 
 

@@ -55,8 +55,8 @@ NONNEG_FEW_POINTS = 1e-3
 # GOOD_LIGHT_BELOW of max|b|: 0.0022–0.0044 on the simulator's standard-light points and sources (96×112 to
 # 160×192), 0.0057–0.0106 in its low light (clsdcam.solve.auto_weights.lighter_few_points). Not on the fewest, under
 # FEWEST_POINTS_PER_PIXEL lit voxels a window pixel: the simulator's two-point scenes, halved, needed a stop at 0.01
-# (at 0.015 two of five ended 0.27–0.30 dB short of their answer), and unhalved they come within 7 % sooner
-# (docs/convergence.md, "A wider stop for a few points in good light")
+# (at 0.015 two of five ended 0.27–0.30 dB short of their answer); unhalved, nine of them stop 5 % sooner at 0.01, all
+# within (docs/convergence.md, "A wider stop for a few points in good light")
 LIGHTER_FEW_POINTS = 0.5
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
 # mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64
