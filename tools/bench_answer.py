@@ -70,7 +70,7 @@ def run_scene(plan: dict, args) -> dict:
     default = auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points, lighter)
     return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
             "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
-            "noise": attrs["noise_estimate"],
+            "lighter": lighter, "noise": attrs["noise_estimate"],
             "answer": {"psnr": answer["psnr"], "angle": answer["angle"], "drift_db": answer["psnr"] - before["psnr"],
                        "drift_deg": answer["angle"] - before["angle"]},
             "default": stop(points, answer, default), "stops": [stop(points, answer, t) for t in args.tolerances],
