@@ -271,8 +271,8 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
 
 def balance_factors(result) -> list | None:
     """The β_d (λ, y, x) the run's TV penalties were balanced by, relative to μ₂ when the balance ran (the camera's,
-    or half of it on a few points in good light; times C: the threshold over the differences' RMS that μ₂ had), or
-    None where it did not balance."""
+    or half of it on a few points to lighten, ``lighter_few_points``; times C: the threshold over the differences' RMS
+    that μ₂ had), or None where it did not balance."""
     carry = result.state.carry
     balance = None if carry is None else carry[0].penalties.tv_balance
     return None if balance is None else list(balance)

@@ -148,10 +148,10 @@ class AutoWeights:
                         f"{p:.2g} ≥ {self.point_like_below:g})")
         elif few_points:
             driver.narrow_stop(tolerance)
+            light = (f"; in good light, noise {self.chosen['noise_estimate']:.2g} < {GOOD_LIGHT_BELOW:g}, and not of "
+                     f"the fewest, ≥ {FEWEST_POINTS_PER_PIXEL:g} a pixel") if lighter else ""
             driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a point-like scene of few lit voxels: "
-                        f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g}" + (
-                            f"; in good light, noise {self.chosen['noise_estimate']:.2g} < {GOOD_LIGHT_BELOW:g}, and "
-                            f"not of the fewest, ≥ {FEWEST_POINTS_PER_PIXEL:g} a pixel" if lighter else "") + ")")
+                        f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g}{light})")
 
     def _measure_likeness(self, problem, x) -> None:
         """The iterate's window's p = mean/max, kept as the attribute ``mean_over_peak``, n = p times the window's

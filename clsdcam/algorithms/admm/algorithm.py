@@ -51,11 +51,10 @@ NONNEG_FEW_POINTS = 1e-3
 # then sets μ₂,d from the thresholds): the three standard-light sixteen-source scenes the 3000-iteration cap held
 # 0.4–1.0 dB short of their answer (112×144 to 160×192) come within it, a fresh 144×176 panel stops in 9 % fewer
 # iterations and the 96×112 tuning scenes in 15 % more, all within; in low light the same change cost iterations
-# (docs/convergence.md, "Halved penalties for a few points in good light"). Good light is the probe's noise σ̂ under
-# GOOD_LIGHT_BELOW of max|b|: 0.0022–0.0044 on the simulator's standard-light points and sources (96×112 to
-# 160×192), 0.0057–0.0106 in its low light (clsdcam.solve.auto_weights.lighter_few_points). Not on the fewest, under
-# FEWEST_POINTS_PER_PIXEL lit voxels a window pixel: the simulator's two-point scenes, halved, needed a stop at 0.01
-# (at 0.015 two of five ended 0.27–0.30 dB short of their answer); unhalved, nine of them stop 5 % sooner at 0.01, all
+# (docs/convergence.md, "Halved penalties for a few points in good light"). Good light, and the fewest points, are the
+# probe's readings (clsdcam.solve.auto_weights.lighter_few_points, with their measured ranges). Not on the fewest, under
+# FEWEST_POINTS_PER_PIXEL lit voxels a window pixel: the simulator's two-point scenes, halved, needed a stop at 0.01 (at
+# 0.015 two of five ended 0.27–0.30 dB short of their answer); unhalved, nine of them stop 5 % sooner at 0.01, all
 # within (docs/convergence.md, "A wider stop for a few points in good light")
 LIGHTER_FEW_POINTS = 0.5
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
