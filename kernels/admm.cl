@@ -147,23 +147,35 @@ __kernel void admm_rescale_tv_duals(__global REAL *eta, __global REAL *s, long n
     }
 }
 
-/* admm_rhs: X_i ← X_i·T_{i mod plane} + R_i on complex spectra (K, plane), T = μ₁conj(Ĥ) (plane): the c-step's
- * right-hand side in Fourier. Grid (i, k) as cmul's. */
-__kernel void admm_rhs(__global REAL2 *X, __global const REAL2 *R, __global const REAL2 *T, int plane)
-{
-    int i = get_global_id(0);
-    size_t at = get_global_id(1) * plane + i;
-    if (i >= plane) return;
-    REAL2 a = X[at], t = T[i], r = R[at];
-    store_complex(X, at, a.x * t.x - a.y * t.y + r.x, a.x * t.y + a.y * t.x + r.y);
-}
-
-/* admm_divide: X_i ← X_i·d_i, a complex spectrum by a real one of the same shape (the c-step's divisors 1/(…) in
- * DCT_λ order). 1-D grid over the n complex elements (rounded up, bounds-checked). */
-__kernel void admm_divide(__global REAL2 *X, __global const REAL *d, long n)
+/* admm_band_solve: the c-step's solve at each Fourier coefficient i of the plane (one work item each). With the
+ * right-hand side r_k = X_k·T_i + R_k (T = μ₁conj(Ĥ)), the tridiagonal system (a_i·I + e·D_λᵀD_λ)v = r along the
+ * K bands by Thomas's sweeps on the pivots m (terms.band_pivots; e = μ₂,λ, 0 without TV along λ):
+ *   forward g_k = (r_k + e·g_{k−1})·m_k,   back v_k = g_k + (e·m_k)·v_{k+1};
+ * then X_k ← v_k and R_k ← Ĥ_i·v_k. X, R, m are (K, plane), T and Ĥ (plane). Each band's coefficients are
+ * consecutive work items (coalesced). 1-D grid over the plane (rounded up, bounds-checked). */
+__kernel void admm_band_solve(__global REAL2 *X, __global REAL2 *R, __global const REAL2 *T,
+                              __global const REAL2 *Hh, __global const REAL *m, REAL e, int K, long plane)
 {
     size_t i = get_global_id(0);
-    if (i >= n) return;
-    REAL2 a = X[i];
-    store_complex(X, i, a.x * d[i], a.y * d[i]);
+    if (i >= (size_t)plane) return;
+    REAL2 t = T[i], h = Hh[i];
+    REAL gx = 0, gy = 0;
+    for (int k = 0; k < K; ++k) {
+        size_t at = k * plane + i;
+        REAL2 a = X[at], r = R[at];
+        REAL pivot = m[at];
+        gx = (a.x * t.x - a.y * t.y + r.x + e * gx) * pivot;
+        gy = (a.x * t.y + a.y * t.x + r.y + e * gy) * pivot;
+        store_complex(X, at, gx, gy);
+    }
+    store_complex(R, (K - 1) * plane + i, gx * h.x - gy * h.y, gx * h.y + gy * h.x);
+    for (int k = K - 2; k >= 0; --k) {
+        size_t at = k * plane + i;
+        REAL2 g = X[at];
+        REAL factor = m[at] * e;
+        gx = g.x + gx * factor;
+        gy = g.y + gy * factor;
+        store_complex(X, at, gx, gy);
+        store_complex(R, at, gx * h.x - gy * h.y, gx * h.y + gy * h.x);
+    }
 }

@@ -16,7 +16,7 @@ __kernel void gram(__global ACC *partial, __local ACC *scratch, __global const R
 }
 
 /* bandmix: out[k,p] = Σ_j M[k,j]·x[j,p], a K×J matrix applied along the band axis (j ascending, in REAL):
- * a square mix (low-rank prox, ADMM's DCT along λ), or a spectral basis's expansion (K×r) or projection (r×K).
+ * a square mix (low-rank prox), or a spectral basis's expansion (K×r) or projection (r×K).
  * Work item (p, r) computes output bands k = r·ROWS … r·ROWS + ROWS − 1 (those < K) of pixel p. A work-group is
  * TILE pixels × the row blocks of its dim 1 (all ⌈K/ROWS⌉ of them where the group size allows): it copies x's
  * TILE columns into local memory, CHUNK bands at a time, once for all its rows, so that each x[j, p] is read from

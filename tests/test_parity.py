@@ -406,9 +406,9 @@ RELAXATION = 1.7     # the splits are compared over-relaxed, as the default runs
 TV_AXES = {"every axis": (1.0, 0.5, 2.0), "not λ": (1.0, 1.0, 0.0), "x only": (1.0, 0.0, 0.0), "no TV": None}  # x, y, λ
 
 
-def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"]):
-    """ADMM's steps on a 5-band camera of 6×7 pixels (TV with ``tv_weights`` along x, y, λ as ``--tv-weights``, or
-    none; L1; a positive b), on NumPy and on ``backend``, with the same penalties."""
+def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"], n_bands=5):
+    """ADMM's steps on an ``n_bands``-band camera of 6×7 pixels (TV with ``tv_weights`` along x, y, λ as
+    ``--tv-weights``, or none; L1; a positive b), on NumPy and on ``backend``, with the same penalties."""
     from clsdcam.camera.model import ForwardModel
     from clsdcam.solve.priors import Sparsity, TotalVariation
     from clsdcam.solve.solver import Settings
@@ -417,7 +417,7 @@ def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"]):
     from clsdcam.solve.problem import Problem
 
     rng = np.random.default_rng(5)
-    psf, filters, b = rng.random((6, 7)), rng.random((5, 6, 7)), rng.random((6, 7))
+    psf, filters, b = rng.random((6, 7)), rng.random((n_bands, 6, 7)), rng.random((6, 7))
     pair = []
     for be in (NumpyBackend(dtype), backend):
         model = ForwardModel(be, psf, filters)
@@ -466,11 +466,11 @@ def flat_numbers(numbers) -> np.ndarray:
 
 @pytest.mark.parametrize("axes", list(TV_AXES))
 @pytest.mark.parametrize("dtype", DTYPES)
-def test_admm_splits_tv_adjoint_and_division_match_numpy(dtype, axes, path):
+def test_admm_splits_tv_adjoint_and_band_solve_match_numpy(dtype, axes, path):
     """From the same random state: the splits (x-, w- and u-steps with their duals and sums, over-relaxed), the TV
-    adjoint and the Fourier division (DCT along λ, divisors, Ĥ·v̂), and every dual's rescaling for new penalties,
-    agree with NumPy's to the elementwise rule (float64: 1e-12), with TV on every axis, on some (the kernels skip the
-    others), or none (zero-size split arrays); each axis with its own TV penalty."""
+    adjoint and the c-step's solve along λ (the right-hand side, the sweeps, Ĥ·v̂), and every dual's rescaling for new
+    penalties, agree with NumPy's to the elementwise rule (float64: 1e-12), with TV on every axis, on some (the
+    kernels skip the others), or none (zero-size split arrays); each axis with its own TV penalty."""
     backend = opencl(dtype, PATH_BACKEND[path])
     pair = admm_pair(dtype, backend, TV_AXES[axes])
     assert [len(split.axes) for split in pair] == [3 - TV_AXES[axes].count(0.0) if TV_AXES[axes] else 0] * 2
@@ -485,7 +485,7 @@ def test_admm_splits_tv_adjoint_and_division_match_numpy(dtype, axes, path):
     splits_agree()
     for split, state in zip(pair, (ref, got)):
         split._add_tv_adjoint(state)
-        split._divide(*state.spectra)
+        split._band_solve(*state.spectra)
     assert_states_match(ref, got, backend, tolerance)
     for split, state in zip(pair, (ref, got)):
         split.rescale_tv_duals(state, {0: 0.3, 1: 2.5, 2: 1.1})
@@ -497,6 +497,20 @@ def test_admm_splits_tv_adjoint_and_division_match_numpy(dtype, axes, path):
         repenalise(split, state, be, replace(old.scaled(0.5), nonneg=0.3 * old.nonneg))
     assert_states_match(ref, got, backend, tolerance)
     splits_agree()                                  # the splits under the new penalties
+
+
+@pytest.mark.parametrize("n_bands", [1, 2])
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_admm_band_solve_matches_numpy_on_one_and_two_bands(dtype, n_bands, path):
+    """The c-step's solve along λ at the sweeps' edge cases (one band: no coupling, the last pivot the only one; two:
+    no interior band), TV on every axis: v̂ and Ĥ·v̂ agree with NumPy's to the elementwise rule."""
+    backend = opencl(dtype, PATH_BACKEND[path])
+    pair = admm_pair(dtype, backend, n_bands=n_bands)
+    assert [split.n_bands for split in pair] == [n_bands] * 2 and pair[0].coupling > 0
+    ref, got = random_states(pair, backend)
+    for split, state in zip(pair, (ref, got)):
+        split._band_solve(*state.spectra)
+    assert_states_match(ref, got, backend, 2e-6 if dtype == "float32" else 1e-12)
 
 
 def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_memory):
@@ -522,6 +536,6 @@ def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(s
         cubes.append(solver.solve(0.5 * simulation.measurement, state=state, iters=iters).cube)
         uploaded.append({name: kept[2] for name, kept in solver.shared[TERMS_KEY]._uploads.items()})
     assert uploaded[0] == uploaded[1] == {}                                      # NumPy uploads nothing
-    assert set(uploaded[2]) == {"filters", "transfer", "gain", "data transfer", "divisors"}
+    assert set(uploaded[2]) == {"filters", "transfer", "gain", "data transfer", "pivots"}
     assert all(uploaded[3][name] is array for name, array in uploaded[2].items())    # the same device arrays
     assert np.linalg.norm(cubes[1] - cubes[0]) / np.linalg.norm(cubes[0]) <= 1e-4

@@ -21,7 +21,7 @@ its penalty: ‖q‖² = μ₁‖q_data‖² + μ₂Σ‖q_d‖² + μ₃‖q_no
   from the point before, and the memory cleared.
 * **spectral** = T: spectral adaptive penalties (Xu, Figueiredo and Goldstein 2017), each split's penalty
   re-estimated every T iterations from the curvatures its steps and duals show (:class:`Spectral`); a change costs
-  the c-step's new divisors and the scaled duals' rescaling (:func:`change_penalties`), no factorisation.
+  the c-step's new pivots and the scaled duals' rescaling (:func:`change_penalties`), no factorisation.
 """
 from __future__ import annotations
 

@@ -10,8 +10,8 @@ minus the time of the parts inside it (exclusive), except that an opaque part ke
 opaque parts (a basis check's transforms count as the check's, its power iteration as a power iteration). The
 parts, per iteration:
 
-- transforms: every scipy.fft call the solve's thread makes (the pruned forward and adjoint; ADMM's DCT along λ
-  is part of its division and counts as its splits);
+- transforms: every scipy.fft call the solve's thread makes (the pruned forward and adjoint; ADMM's solve along λ
+  counts as its splits);
 - filter mix, pad and crop: the rest of A and Aᵀ (the gradient step, the data term of the residual);
 - prior and constraint: the prox (TV and v ≥ 0 are one fused pass; in a subspace, B·c and Bᵀ· with it);
 - momentum: FISTA's restart test and extrapolation;
@@ -78,14 +78,14 @@ WEIGHTS = "weight re-estimation"
 SETUP = "ADMM's set-up"
 PER_ITERATION = (TRANSFORMS, FILTERS, PRIOR, MOMENTUM, OBJECTIVE, BASIS, SPLITS, OTHER)
 ONE_OFF = (MOVES, POWER, WEIGHTS, SETUP)
-FFT_FUNCTIONS = ("fft", "ifft", "rfft", "irfft", "rfft2", "irfft2", "rfftn", "irfftn", "dct", "idct")
+FFT_FUNCTIONS = ("fft", "ifft", "rfft", "irfft", "rfft2", "irfft2", "rfftn", "irfftn")
 
 # (owner, attribute, part, opaque): the functions wrapped; a rename in the package fails tests/test_tools.py
 DEVICE_FFTS = [(engine, name, TRANSFORMS, False) for engine in (device_fft.HostFFT, device_fft.ReiknaFFT,
                                                                  device_fft.VkFFT) for name in ("forward", "inverse")]
 try:                                   # ADMM's kernels (needs pyopencl)
     from clsdcam.algorithms.admm.kernel_steps import KernelSplitting
-    KERNEL_SPLITTING = [(KernelSplitting, "_divide", SPLITS, True), (KernelSplitting, "start", SETUP, True),
+    KERNEL_SPLITTING = [(KernelSplitting, "_band_solve", SPLITS, True), (KernelSplitting, "start", SETUP, True),
                         (KernelSplitting, "set_penalties", SETUP, True)]
 except ImportError:
     KERNEL_SPLITTING = []
@@ -97,7 +97,7 @@ PARTS = [(scipy.fft, name, TRANSFORMS, False) for name in FFT_FUNCTIONS] + DEVIC
     (Fista, "_stats", MOMENTUM, False),
     (Fista, "_extrapolate", MOMENTUM, False),
     (Admm, "iterate", SPLITS, False),
-    (Splitting, "_divide", SPLITS, True),
+    (Splitting, "_band_solve", SPLITS, True),
     (admm_algorithm, "band_steps", SETUP, True),
     (SplittingBase, "set_penalties", SETUP, True),
     (Splitting, "start", SETUP, True),

@@ -20,14 +20,17 @@ each with its scaled dual: x = H·v (data), u_d = D_d·v (TV), w = v (non-negati
 
       (μ₁HᵀH + μ₂ΣD_dᵀD_d + μ₃I) v = μ₁Hᵀ(x − ξ) + μ₂ΣD_dᵀ(u_d − η_d) + μ₃(w − ρ)
 
-  HᵀH and the spatial D_yᵀD_y, D_xᵀD_x are diagonal in the 2-D Fourier basis (|Ĥ|², 2 − 2cos(2πk/N)); D_λᵀD_λ,
-  the path graph's Laplacian along the bands, is diagonal in the orthonormal DCT-II along λ (eigenvalues
-  Λ_j = 2 − 2cos(πj/K)). So the system is one division per Fourier coefficient and DCT index:
+  HᵀH and the spatial D_yᵀD_y, D_xᵀD_x are diagonal in the 2-D Fourier basis (|Ĥ|², 2 − 2cos(2πk/N)), the same
+  for every band; D_λᵀD_λ, the path graph's Laplacian along the bands, is tridiagonal (1, 2, …, 2, 1; −1 beside).
+  So the system is one K×K tridiagonal system per Fourier coefficient ω:
 
-      v̂ = IDCT_λ[ DCT_λ(μ₁conj(Ĥ)·rfft2(x − ξ) + rfft2(μ₂ΣD_dᵀ(u_d − η_d) + μ₃(w − ρ)))
-                  / (μ₁|Ĥ|² + μ₂(|d̂_y|² + |d̂_x|²) + μ₂Λ_j + μ₃) ]
+      (a_ω·I + μ₂,λ·D_λᵀD_λ) v̂_ω = μ₁conj(Ĥ_ω)·rfft2(x − ξ)_ω + rfft2(Σ_d μ₂,dD_dᵀ(u_d − η_d) + μ₃(w − ρ))_ω,
+      a_ω = μ₁|Ĥ_ω|² + μ₂,y|d̂_y|² + μ₂,x|d̂_x|² + μ₃ > 0,
 
-  then v = irfft2(v̂) and Hv = irfft2(Ĥ·v̂): 2K forward and 2K inverse transforms, as one FISTA gradient.
+  strictly diagonally dominant, solved by Thomas's sweeps on pivots computed once per penalties
+  (:func:`~.terms.band_pivots`): each coefficient read and written twice, where a DCT along λ (which diagonalises
+  D_λᵀD_λ) would mix all K bands twice. Then v = irfft2(v̂) and Hv = irfft2(Ĥ·v̂): 2K forward and 2K inverse
+  transforms, as one FISTA gradient.
 * **x-step**, per pixel (Sherman–Morrison): with q = Hv + ξ, argmin ½(b_p − f_pᵀx_p)² + μ₁/2‖x_p − q_p‖² is
   x_p = q_p + f_p·(b_p − f_pᵀq_p)/(μ₁ + ‖f_p‖²) on the sensor window, x_p = q_p outside it.
 * **u-step**: u_d = soft(D_d v + η_d, τw_d/μ₂), the exact prox of the anisotropic TV (not the Haar average FISTA

@@ -1,6 +1,6 @@
 """ADMM with closed-form steps (Boyd et al. 2011; the splits of Antipa et al.'s DiffuserCam solver, with the filter
-array's per-pixel inverse and the spectral TV's DCT): :mod:`clsdcam.algorithms.admm` derives the steps, and
-docs/admm.md has the measurements. One iteration is the c-step (the transforms) and then each split's
+array's per-pixel inverse and the spectral TV's tridiagonal solve): :mod:`clsdcam.algorithms.admm` derives the
+steps, and docs/admm.md has the measurements. One iteration is the c-step (the transforms) and then each split's
 step with its dual:
 
     v, Hv ← c-step(x − ξ, u − η, w − ρ);   x, ξ ← x-step(Hv + ξ);   u, η ← u-step(Dv + η);   w, ρ ← w-step(v + ρ)
@@ -98,9 +98,9 @@ class Admm(Algorithm):
     monotone = False
     converges_soonest = True       # --algorithm auto's choice with --iters auto (docs/convergence.md)
     # field cubes it keeps, for the device's memory plan (cl_devices.problem_bytes): v, Hv, x, ρ, w, the rest, η and
-    # s on three axes (12), three spectra (the c-step's two and the DCT's) with the divisors (3.5), the start (1),
-    # the model's field and a scratch (2); FISTA keeps 6
-    field_buffers = 19
+    # s on three axes (12), the c-step's two spectra with the pivots (2.5), the start (1), the model's field and a
+    # scratch (2); FISTA keeps 6
+    field_buffers = 18
     band_space_only = True         # no splitting of a spectral subspace yet
     priors = ("tv", "l1")          # the priors it has a closed-form step for (band_steps)
     point_like_below = POINT_LIKE_BELOW

@@ -18,7 +18,7 @@ times above what C asks ("Lighter penalties for a few points"). The RMS is read 
 once per solve), so both backends set the same penalties.
 
 Any change of penalties between two iterations (the balance's, a point-like scene's, :func:`repenalise`) keeps
-every unscaled dual, so the iteration goes on from the same point with new divisors (ADMM's fixed point, the splits
+every unscaled dual, so the iteration goes on from the same point with new pivots (ADMM's fixed point, the splits
 and the unscaled duals, does not depend on the penalties):
 
 * μ₂,d → μ₂,d': η_d ← r_d·η_d and s_d ← s_d + (1 − r_d)η_d with r_d = μ₂,d/μ₂,d', so u_d = s_d + η_d stays;

@@ -1,7 +1,7 @@
 """ADMM's steps on NumPy arrays: :class:`Splitting`, the iteration :mod:`clsdcam.algorithms.admm` derives, with both
-passes and the spectral division on cache-sized row blocks on the host's threads (``backends/blocks``): the
-iteration reads each cube about twice besides its transforms. The first differences D_d and their adjoints are
-here too (the TV split's)."""
+passes and the c-step's solve along λ on cache-sized row blocks on the host's threads (``backends/blocks``): the
+iteration reads each cube about twice besides its transforms. The first differences D_d and their adjoints, and
+the tridiagonal sweeps along λ, are here too."""
 from __future__ import annotations
 
 import numpy as np
@@ -70,6 +70,25 @@ def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarr
     return out
 
 
+def sweep_bands(g: np.ndarray, pivots: np.ndarray, coupling, scratch: dict) -> np.ndarray:
+    """g ← v with (a·I + e·D_λᵀD_λ)v = g along axis 0, one system per (y, x), by Thomas's sweeps on the pivots m of
+    :func:`~.terms.band_pivots` (e = ``coupling``, in g's real precision): forward g_j ← (g_j + e·g_{j−1})·m_j, back
+    g_j ← g_j + (e·m_j)·g_{j+1}; each step one plane of the block (``kernels/admm.cl``'s admm_band_solve, in its
+    order)."""
+    g[0] *= pivots[0]
+    if not coupling:
+        g[1:] *= pivots[1:]
+        return g
+    term = scratch_buffer(scratch, "sweep term", g.shape[1:], g.dtype)
+    factor = scratch_buffer(scratch, "sweep factor", pivots.shape[1:], pivots.dtype)
+    for j in range(1, len(g)):
+        g[j] += np.multiply(g[j - 1], coupling, out=term)
+        g[j] *= pivots[j]
+    for j in range(len(g) - 2, -1, -1):
+        g[j] += np.multiply(g[j + 1], np.multiply(pivots[j], coupling, out=factor), out=term)
+    return g
+
+
 def relax(q: np.ndarray, previous: np.ndarray, alpha: float) -> np.ndarray:
     """q ← αq + (1 − α)·previous in place (nothing when α = 1): a split's over-relaxed point, α and 1 − α rounded
     to q's precision as the kernels round them."""
@@ -117,7 +136,7 @@ class Splitting(SplittingBase):
         data, rest = state.spectra
         self._rfft2(state.hv, data)
         self._rfft2(state.rest, rest)
-        self._divide(data, rest)                 # v̂ into ``data``, Ĥ·v̂ into ``rest``
+        self._band_solve(data, rest)             # v̂ into ``data``, Ĥ·v̂ into ``rest``
         self._irfft2(data, state.v)
         self._irfft2(rest, state.hv)
 
@@ -226,17 +245,17 @@ class Splitting(SplittingBase):
             state.s[i] += (self.dtype.type(1) - r) * state.eta[i]
             state.eta[i] *= r
 
-    def _divide(self, data: np.ndarray, rest: np.ndarray) -> None:
-        """data ← v̂ = IDCT_λ[DCT_λ(μ₁conj(Ĥ)·data + rest)/divisor], rest ← Ĥ·v̂, on row blocks of the spectra."""
+    def _band_solve(self, data: np.ndarray, rest: np.ndarray) -> None:
+        """data ← v̂, the system along λ at each Fourier coefficient for the right-hand side μ₁conj(Ĥ)·data + rest
+        (:func:`sweep_bands`), rest ← Ĥ·v̂; on row blocks of the spectra."""
         k, rows, cols = data.shape
+        coupling = self.dtype.type(self.coupling)
 
-        def block(y0, y1, _scratch):
+        def block(y0, y1, scratch):
             spectrum = data[:, y0:y1]
             spectrum *= self._data_transfer[y0:y1]
             spectrum += rest[:, y0:y1]
-            rotated = scipy.fft.dct(spectrum, type=2, norm="ortho", axis=0)
-            rotated *= self._inverse[:, y0:y1]
-            spectrum[...] = scipy.fft.idct(rotated, type=2, norm="ortho", axis=0, overwrite_x=True)
+            sweep_bands(spectrum, self._pivots[:, y0:y1], coupling, scratch)
             np.multiply(spectrum, self.transfer[y0:y1], out=rest[:, y0:y1])
 
         map_blocks(block, rows, k * cols * data.itemsize, self.workers)

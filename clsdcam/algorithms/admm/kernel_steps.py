@@ -5,32 +5,20 @@
 * the splits are three kernels of ``kernels/admm.cl``: the x-step (one work item per field pixel, which also sums
   the data term on the sensor window), the w-step (which also sums ‖w⁺ − w‖² and ‖w⁺‖²) and the u-step (every
   active TV axis in one pass);
-* the c-step is the TV adjoint (one kernel), the backend's transforms (2K forward, 2K inverse), the right-hand side
-  in Fourier (one kernel), the DCT along λ and its inverse as the backend's ``bandmix`` by the orthonormal DCT-II
-  matrix on the spectrum's real and imaginary parts (a real K×K matrix mixes both alike), the division between them
-  (one kernel), and Ĥ·v̂ by ``cmul``.
+* the c-step is the TV adjoint (one kernel), the backend's transforms (2K forward, 2K inverse), and between them
+  one kernel that forms the right-hand side in Fourier, solves the tridiagonal system along λ at each Fourier
+  coefficient by Thomas's sweeps and writes Ĥ·v̂ beside v̂ (admm_band_solve: v̂'s spectrum read and written twice,
+  the other once).
 
-Two scalar reads an iteration (the two reductions; on the host path each ``bandmix`` also maps its buffers, two
-more waits for the queue); the calibration's and the penalties' terms are uploaded once per solver
-(``CalibrationTerms.on_device``).
+Two scalar reads an iteration (the two reductions); the calibration's and the penalties' terms are uploaded once
+per solver (``CalibrationTerms.on_device``).
 """
 from __future__ import annotations
 
 import numpy as np
-import scipy.fft
 
 from ...backends.base import ints, total
 from .terms import CalibrationTerms, SplitState, SplittingBase
-
-
-def dct_matrix(n: int) -> np.ndarray:
-    """C with C·x = the orthonormal DCT-II of x (``scipy.fft.dct(x, norm="ortho")``); Cᵀ is its inverse."""
-    return scipy.fft.dct(np.eye(n), type=2, norm="ortho", axis=0)
-
-
-def real_view(spectrum):
-    """A complex (K, Hp, Wq) device array as real (K, Hp, 2Wq): its real and imaginary parts side by side."""
-    return spectrum.view(np.finfo(spectrum.dtype).dtype)
 
 
 class KernelSplitting(SplittingBase):
@@ -44,9 +32,7 @@ class KernelSplitting(SplittingBase):
         self.b = b
         self.filters = terms.on_device(self.backend, "filters", terms.filters)
         self.transfer = terms.on_device(self.backend, "transfer", terms.transfer, complex_=True)
-        self.dct = dct_matrix(self.n_bands)
         self.mask = np.int32(sum(1 << axis for axis in self.axes))
-        self._rotated = None                     # the spectrum in DCT_λ order (the c-step's scratch)
 
     def set_penalties(self, penalties):
         """The penalties, and their terms on the device."""
@@ -54,7 +40,7 @@ class KernelSplitting(SplittingBase):
         be, terms = self.backend, self.terms
         self._gain = terms.on_device(be, "gain", self._gain)
         self._data_transfer = terms.on_device(be, "data transfer", self._data_transfer, complex_=True)
-        self._inverse = terms.on_device(be, "divisors", self._inverse)
+        self._pivots = terms.on_device(be, "pivots", self._pivots)
 
     # ---- the state -----------------------------------------------------------------------------------------
     def start(self, v0) -> tuple[SplitState, float]:
@@ -81,7 +67,7 @@ class KernelSplitting(SplittingBase):
         data, rest = state.spectra
         be.fft2(state.hv, out=data)
         be.fft2(state.rest, out=rest)
-        self._divide(data, rest)
+        self._band_solve(data, rest)
         be.ifft2(data, self.field_shape, out=state.v)
         be.ifft2(rest, self.field_shape, out=state.hv)
 
@@ -117,17 +103,12 @@ class KernelSplitting(SplittingBase):
         arguments)."""
         return [self._real(value(axis) if axis in self.axes else 0.0) for axis in range(3)]
 
-    def _divide(self, data, rest) -> None:
-        """data ← v̂ = Cᵀ[C(μ₁conj(Ĥ)·data + rest)·divisor] (C the DCT along λ), rest ← Ĥ·v̂."""
-        be, k = self.backend, self.kernels
+    def _band_solve(self, data, rest) -> None:
+        """data ← v̂, the system along λ at each Fourier coefficient for the right-hand side μ₁conj(Ĥ)·data + rest,
+        rest ← Ĥ·v̂ (one kernel)."""
         plane = data.shape[1] * data.shape[2]
-        k.grid2("admm_rhs", plane, self.n_bands, data, rest, self._data_transfer, np.int32(plane))
-        if self._rotated is None or self._rotated.shape != data.shape:
-            self._rotated = be.empty(data.shape, True)
-        be.bandmix(real_view(data), self.dct, out=real_view(self._rotated))
-        k.grid1("admm_divide", data.size, self._rotated, self._inverse, np.int64(data.size))
-        be.bandmix(real_view(self._rotated), self.dct.T, out=real_view(data))
-        be.cmul(data, self.transfer, out=rest)
+        self.kernels.grid1("admm_band_solve", plane, data, rest, self._data_transfer, self.transfer, self._pivots,
+                           self._real(self.coupling), np.int32(self.n_bands), np.int64(plane))
 
     def _convolve(self, v, spectrum, out):
         """Hv = irfft2(Ĥ·rfft2(v)) into ``out`` (2K transforms), ``spectrum`` its scratch."""

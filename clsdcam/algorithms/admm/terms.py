@@ -60,10 +60,37 @@ class SplitState:
         return self.penalties
 
 
-def band_eigenvalues(n_bands: int) -> np.ndarray:
-    """Λ_j = 2 − 2cos(πj/K): the eigenvalues of DᵀD for the first differences along λ (last one 0), whose
-    eigenvectors are the orthonormal DCT-II's."""
-    return 2.0 - 2.0 * np.cos(np.pi * np.arange(n_bands) / n_bands)
+def band_degrees(n_bands: int) -> np.ndarray:
+    """The diagonal of D_λᵀD_λ for the first differences along λ (the last one 0): the path graph's degrees
+    1, 2, …, 2, 1 (0 for one band); its off-diagonals are −1."""
+    degrees = np.full(n_bands, 2.0)
+    degrees[0] -= 1.0                      # one band: 2 − 1 − 1 = 0
+    degrees[-1] -= 1.0
+    return degrees
+
+
+def band_pivots(diagonal: np.ndarray, coupling: float, n_bands: int) -> np.ndarray:
+    """Thomas's reciprocal pivots of the tridiagonal systems (a·I + e·D_λᵀD_λ)v = r along the bands, one per entry
+    a of ``diagonal`` (e = ``coupling``), in float64, shape (K,) + diagonal's:
+
+        m_0 = 1/(a + e·deg_0),   m_j = 1/(a + e·deg_j − e²·m_{j−1});
+
+    the solve is then g_j = (r_j + e·g_{j−1})·m_j forward and v_j = g_j + e·m_j·v_{j+1} back. With a > 0 the
+    system is strictly diagonally dominant: every denominator but the last exceeds e (by induction, e·m_{j−1} < 1),
+    so e·m_j < 1 for j < K − 1 and no pivoting is needed; a rounding error passes from one band to the next with a
+    weight below 1. The last pivot, between about 1/(a + e) (a ≫ e) and 1/(K·a) (a ≪ e), carries the system's own
+    conditioning."""
+    degrees = band_degrees(n_bands)
+    pivots = np.empty((n_bands,) + np.shape(diagonal))
+    pivots[0] = 1.0 / (diagonal + coupling * degrees[0])
+    for j in range(1, n_bands):
+        pivots[j] = 1.0 / (diagonal + coupling * degrees[j] - coupling * coupling * pivots[j - 1])
+    return pivots
+
+
+def band_coupling(p: Penalties, axes) -> float:
+    """e = μ₂,λ, the c-step's coupling between neighbouring bands (0 without TV along λ)."""
+    return p.tv_along(0) if 0 in axes else 0.0
 
 
 def difference_spectrum(n: int, half: bool = False) -> np.ndarray:
@@ -75,8 +102,8 @@ def difference_spectrum(n: int, half: bool = False) -> np.ndarray:
 class CalibrationTerms:
     """What the steps need of one model's calibration alone, the filters f_p with their energies ‖f_p‖² and the
     transfer function Ĥ with |Ĥ|², and of the penalties, the x-step's gains f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ) and the
-    c-step's divisors: built once and kept by the solver, so a video's frames do not rebuild them (the divisors
-    alone are a float64 pass over the whole spectrum); the terms of the last penalties are kept."""
+    c-step's pivots: built once and kept by the solver, so a video's frames do not rebuild them (the pivots are a
+    float64 recursion over the whole spectrum); the terms of the last penalties are kept."""
 
     def __init__(self, model, filters: np.ndarray):
         self.dtype = np.dtype(model.backend.dtype)
@@ -86,12 +113,12 @@ class CalibrationTerms:
         self.filter_energy = np.einsum("khw,khw->hw", self.filters, self.filters, dtype=np.float64)
         self.transfer = transfer_function(model.psf, model.geometry).astype(self.cdtype)
         self.transfer_power = np.abs(self.transfer.astype(np.complex128)) ** 2
-        self._last = None           # ((penalties, TV axes), (gains, μ₁conj(Ĥ), divisors))
+        self._last = None           # ((penalties, TV axes), (gains, μ₁conj(Ĥ), pivots))
         self._uploads: dict = {}    # term name -> (backend, host array, its device copy)
 
     def for_penalties(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ), 1/(μ₁|Ĥ|² + μ₂,y|d̂_y|² + μ₂,x|d̂_x|² + μ₂,λΛ_j + μ₃)), TV's terms on ``axes``
-        only."""
+        """(f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ), the pivots :func:`band_pivots` of a = μ₁|Ĥ|² + μ₂,y|d̂_y|² + μ₂,x|d̂_x|² + μ₃
+        and e = μ₂,λ), TV's terms on ``axes`` only."""
         key = (astuple(p), tuple(axes))
         if self._last is None or self._last[0] != key:
             self._last = (key, self._penalty_terms(p, axes))
@@ -115,8 +142,8 @@ class CalibrationTerms:
             spatial = spatial + p.tv_along(1) * difference_spectrum(hp)[:, None]
         if 2 in axes:
             spatial = spatial + p.tv_along(2) * difference_spectrum(wp, half=True)[None, :]
-        spectral = p.tv_along(0) * band_eigenvalues(self.n_bands) if 0 in axes else np.zeros(self.n_bands)
-        return gain, data_transfer, (1.0 / (spatial[None] + spectral[:, None, None] + p.nonneg)).astype(self.dtype)
+        pivots = band_pivots(spatial + p.nonneg, band_coupling(p, axes), self.n_bands)
+        return gain, data_transfer, pivots.astype(self.dtype)
 
 
 class SplittingBase:
@@ -159,7 +186,8 @@ class SplittingBase:
     def set_penalties(self, penalties: Penalties):
         """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`)."""
         self.penalties = penalties
-        self._gain, self._data_transfer, self._inverse = self.terms.for_penalties(penalties, self.axes)
+        self._gain, self._data_transfer, self._pivots = self.terms.for_penalties(penalties, self.axes)
+        self.coupling = band_coupling(penalties, self.axes)
 
     def threshold(self, axis: int) -> float:
         """The u-step's soft threshold τw_d/μ₂,d along ``axis``."""
