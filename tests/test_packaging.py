@@ -1,5 +1,6 @@
 """The project's own set-up promises: README commands, CI script, kernels inside the wheel."""
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -25,6 +26,18 @@ def test_readme_opens_with_exactly_two_setup_commands():
 def test_ci_runs_the_readme_test_command():
     ci_lines = (REPO / ".ci" / "run").read_text().splitlines()
     assert readme_commands()[1] in ci_lines
+
+
+def test_a_checkout_on_pythonpath_runs_its_own_kernels_not_the_editable_installs(tmp_path):
+    """An A/B of two commits puts the other checkout on PYTHONPATH: its Python and its kernels/ run, not the
+    kernels the editable install maps ``clsdcam.kernels`` to."""
+    other = tmp_path / "other"
+    shutil.copytree(REPO / "clsdcam", other / "clsdcam", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(REPO / "kernels", other / "kernels")
+    code = "import clsdcam.backends.cl_program as p; print(p.__file__); print(p.kernel_dir())"
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(other)},
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out == [str(other / "clsdcam" / "backends" / "cl_program.py"), str(other / "kernels")]
 
 
 def test_wheel_ships_every_kernel_and_the_colour_table_and_the_installed_package_finds_them(tmp_path):

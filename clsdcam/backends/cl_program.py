@@ -29,14 +29,15 @@ PROGRAM_CACHE = 8     # built programs kept: (context, dtype, accumulator) combi
 
 
 def kernel_dir() -> Path:
-    """``clsdcam.kernels`` when installed (package-dir mapping), else ``<repo>/kernels`` of a checkout."""
-    try:
-        packaged = importlib.resources.files("clsdcam.kernels")
-        if packaged.joinpath("common.cl").is_file():
-            return Path(str(packaged))
-    except (ModuleNotFoundError, TypeError):
-        pass
-    return Path(__file__).resolve().parents[2] / "kernels"
+    """The kernels of the package that is running: ``clsdcam/kernels`` of an installed wheel, else ``kernels/`` of the
+    checkout it was imported from, else the installed ``clsdcam.kernels`` mapping. The checkout comes before the
+    mapping: an editable install maps ``clsdcam.kernels`` to its own tree, so another checkout put on ``PYTHONPATH``
+    (an A/B of two commits) would otherwise run its Python with the installed tree's kernels."""
+    package = Path(__file__).resolve().parents[1]
+    for candidate in (package / "kernels", package.parent / "kernels"):
+        if (candidate / "common.cl").is_file():
+            return candidate
+    return Path(str(importlib.resources.files("clsdcam.kernels")))
 
 
 @lru_cache(maxsize=1)
