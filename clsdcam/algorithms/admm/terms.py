@@ -187,7 +187,11 @@ class SplittingBase:
         """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`)."""
         self.penalties = penalties
         self._gain, self._data_transfer, self._pivots = self.terms.for_penalties(penalties, self.axes)
-        self.coupling = band_coupling(penalties, self.axes)
+
+    @property
+    def coupling(self) -> float:
+        """e = μ₂,λ of the penalties the pivots are of (:func:`band_coupling`)."""
+        return band_coupling(self.penalties, self.axes)
 
     def threshold(self, axis: int) -> float:
         """The u-step's soft threshold τw_d/μ₂,d along ``axis``."""
