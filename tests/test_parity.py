@@ -41,9 +41,10 @@ K, FIELD, SENSOR = 3, (22, 30), (11, 15)      # the primitive cases' size (the s
 # reconstructions: (sensor, bands, iterations) of the simulated scene; --cl-tiny: 10 band-space iterations, then 2
 # in the subspace
 RECONSTRUCTION = {False: ((32, 48), 8, 50), True: ((12, 16), 4, 12)}
-# the tiny reconstructions' spectra (bands, the paper's field), a transform test's shape: Oclgrind's FFT-engine run
-# checks the engines' kernels there instead of in whole reconstructions (tests/test_portability.py)
-TINY_SPECTRA = (RECONSTRUCTION[True][1], *default_field_shape(RECONSTRUCTION[True][0]))
+# the tiny reconstructions' band-space cube (bands, the paper's field), a transform test's shape: Oclgrind's
+# FFT-engine run (tests/test_portability.py) builds each engine's plans for it there, and whole reconstructions
+# through one engine only
+TINY_CUBE = (RECONSTRUCTION[True][1], *default_field_shape(RECONSTRUCTION[True][0]))
 ALL_PRIORS = {"tv": 3e-3, "lowrank": 0.02, "l1": 1e-3, "rank": 3}
 # the first set on the support-sized field's geometry (--support-field; at 32×48 the paper's field size with the
 # window one pixel off centre), the others on the default's paper field
@@ -114,10 +115,10 @@ def test_fft(case, dtype, engine):
     assert_case(case, dtype, opencl(dtype, engine))
 
 
-@pytest.mark.parametrize("shape", [(2, 21, 31), (2, 43, 32), (5, 16, 9), (3, 21, 35), (1, 7, 6), TINY_SPECTRA])
+@pytest.mark.parametrize("shape", [(2, 21, 31), (2, 43, 32), (5, 16, 9), (3, 21, 35), (1, 7, 6), TINY_CUBE])
 def test_fft_odd_shapes_and_band_counts(shape, engine):
     """Odd sizes, odd band counts (one unpaired band when packing), a single band, planes with a prime factor
-    above 7 (VkFFT hands those to reikna), and the tiny reconstructions' spectra."""
+    above 7 (VkFFT hands those to reikna), and the tiny reconstructions' cube."""
     be, ref = opencl("float32", engine), NumpyBackend("float32")
     x = np.random.default_rng(3).standard_normal(shape).astype(np.float32)
     spectrum = be.fft2(be.to_device(x))
