@@ -197,6 +197,7 @@ def test_bench_panel_draws_fresh_scenes_of_every_kind_and_judges_both_rules(tmp_
         fixed = sorted(run["tv_chosen"] for name, run in scene["runs"].items() if name.startswith("--tv "))
         assert fixed == pytest.approx([chosen / 10, chosen, chosen * 10])
         assert [p["iteration"] for p in scene["runs"]["--no-skip"]["points"]] == [4, 8]
+        assert {run["algorithm"] for run in scene["runs"].values()} == {"fista"}   # fixed marks: today's default's
     text = capsys.readouterr().out
     assert text.count("| piecewise | 2 |") == 2 and "| sparse | 1 |" in text and text == (tmp_path / "panel.md").read_text()
     margins = [bench_panel.rule_margins(s)[0] for s in results["scenes"]]
@@ -206,22 +207,6 @@ def test_bench_panel_draws_fresh_scenes_of_every_kind_and_judges_both_rules(tmp_
     assert [title for title, _ in bench_panel.margin_panels(results)] == [
         "default against --no-skip, worst mark", "chosen weight against the best fixed weight"]
     assert (tmp_path / "panel.png").stat().st_size > 0 and (tmp_path / "curves.png").stat().st_size > 0
-
-
-def test_bench_panel_runs_every_configuration_with_the_algorithm_given(tmp_path, capsys, monkeypatch):
-    """--algorithm fista: the default, --no-skip and every fixed weight run FISTA (today's default at --marks 300),
-    and the panel's files say so; the sweep is centred on the weight FISTA's own run chose."""
-    monkeypatch.setattr(bench_panel, "KINDS", {k: v for k, v in bench_panel.KINDS.items() if k != "real"})
-    bench_panel.main(["--size", "24x32", "--bands", "8", "--scenes", "2", "--marks", "4", "--sweep", "3",
-                      "--seed", "7", "--algorithm", "fista", "--out", str(tmp_path)])
-    results = json.loads((tmp_path / "panel.json").read_text())
-    runs = [run for scene in results["scenes"] for run in scene["runs"].values()]
-    assert results["algorithm"] == "fista" and len(runs) == 10 and {run["algorithm"] for run in runs} == {"fista"}
-    assert "marks [4], algorithm fista." in capsys.readouterr().out
-    for scene in results["scenes"]:
-        chosen = scene["runs"]["default"]["tv_chosen"]
-        assert sorted(r["tv_chosen"] for n, r in scene["runs"].items() if n.startswith("--tv ")) == pytest.approx(
-            [chosen / 10, chosen, chosen * 10])
 
 
 def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_path, capsys, monkeypatch):
@@ -818,7 +803,6 @@ def test_weight_rejudge_solves_again_the_scenes_whose_default_weight_changed(tmp
     (lambda p: p.update(size="24by32"), "cannot read the panels"),
     (lambda p: p.update(marks=[10, 20]), "--marks auto"),
     (lambda p: p.update(backend="opencl"), "on NumPy"),
-    (lambda p: p.update(algorithm="fista"), "by the default algorithm"),
 ])
 def test_weight_rejudge_refuses_a_malformed_panel_before_solving(tmp_path, capsys, monkeypatch, spoil, message):
     """Whatever the judgement would trip on later is one line on stderr, exit 2, before any scene is solved."""

@@ -73,8 +73,8 @@ def solve(calibration, measurement, fields: dict, marks) -> tuple[dict, dict]:
     to_stop = marks == AUTO
     result, seconds = timed_run(calibration, measurement, fields if to_stop else dict(fields, iters=max(marks)),
                                 () if to_stop else marks)
-    attrs = {key: result.attrs[key] for key in ("tv", "final_rank", "fft_work_saved", "noise_estimate", "stop_reason", "algorithm")
-             if key in result.attrs}
+    kept = ("tv", "final_rank", "fft_work_saved", "noise_estimate", "stop_reason", "algorithm")
+    attrs = {key: result.attrs[key] for key in kept if key in result.attrs}
     attrs["tv_chosen"] = result.attrs.get("tv_chosen", result.attrs.get("tv"))
     attrs["seconds"] = seconds
     return ({result.iterations: result.cube} if to_stop else result.snapshots), attrs

@@ -22,8 +22,10 @@ at a third of them (its PSNR at mark m/3 against ``--no-skip``'s at m, for the m
 ``--only I,J`` replays some scenes of a panel. ``--marks auto`` runs every configuration, the sweep's weights
 included, to the default stop (``--iters auto``) and judges each at its own final cube: the weight's rule at
 convergence, where the stop, not a mark, ends each run. Without real cubes in ``../shared/data`` the ``real`` kind
-is left out (said on stderr). ``--algorithm fista --marks 300`` makes every run today's default's (FISTA, 300
-iterations): the weight judged as it was before the converged default, on the same scenes, for a paired count.
+is left out (said on stderr). With fixed marks every run but ``--also 'algorithm admm'`` is FISTA (the solver's
+``--algorithm auto`` picks it for a fixed iteration count), so ``--marks 300`` is today's default (FISTA, 300
+iterations) on the scenes of a ``--marks auto`` panel of the same seed: the weight judged before and after the
+converged default, paired. Each run keeps its ``algorithm``.
 """
 from __future__ import annotations
 
@@ -36,7 +38,6 @@ import numpy as np
 
 from bench_accuracy import (ANGLE_MARGIN_DEG, PSNR_MARGIN_DB, Where, add_backend_option, panel_parser, report, save_json,
                             scene_points, size_text, solve)
-from clsdcam.algorithms import ALGORITHMS
 from clsdcam.render import new_figure
 from clsdcam.sim import band_wavelengths, shared_data_dir, simulate
 from clsdcam.sim.kinds import KINDS, make_kind, real_cubes
@@ -133,15 +134,13 @@ def panel_scene(plan: dict, shape, bands: int):
     return simulate(scene=f"kind:{plan['kind']}", shape=shape, n_bands=bands, seed=seed, cube=cube, **noise)
 
 
-def run_scene(plan: dict, shape, bands: int, marks, points: int, also=(), every: dict | None = None) -> dict:
-    """Every run of one scene: the default, --no-skip, each --also option and the sweep's fixed weights, each with
-    the fields ``every`` (--algorithm's) under its own."""
+def run_scene(plan: dict, shape, bands: int, marks, points: int, also=()) -> dict:
     sim = panel_scene(plan, shape, bands)
     runs = {}
     for name, fields in {"default": {}, "--no-skip": {"skip": False}, **{f"--{a}": ALSO[a] for a in also}}.items():
-        runs[name] = run(sim, {**(every or {}), **fields}, marks)
+        runs[name] = run(sim, fields, marks)
     for tau in sweep_weights(runs["default"]["tv_chosen"], points) if points else ():
-        runs[f"--tv {tau:.3g}"] = run(sim, {**(every or {}), "tv": tau}, marks if marks == AUTO else marks[-1:])
+        runs[f"--tv {tau:.3g}"] = run(sim, {"tv": tau}, marks if marks == AUTO else marks[-1:])
     return {**plan, "runs": runs}
 
 
@@ -223,8 +222,7 @@ def point(run: dict) -> str:
 
 
 def markdown(results: dict) -> str:
-    lines = [f"Seed {results['seed']}, {results['size']}×{results['bands']}, marks {results['marks']}, algorithm "
-             f"{results.get('algorithm', 'auto')}.", "",
+    lines = [f"Seed {results['seed']}, {results['size']}×{results['bands']}, marks {results['marks']}.", "",
              "The default against `--no-skip` at every mark (margins ≥ 0 pass: PSNR ≥ full − 0.2 dB, "
              "SA ≤ full + 0.5°):", ""] + kind_rows(results, rule_margins, "rule")
     for name in results.get("also", ()):
@@ -313,8 +311,6 @@ def main(argv=None) -> int:
     parser.add_argument("--only", type=scene_indices, metavar="I[,J...]", help="these scenes of the panel alone")
     parser.add_argument("--also", action="append", choices=list(ALSO), default=[],
                         help="also judge this speed option by the rule, on every scene (repeatable)")
-    parser.add_argument("--algorithm", choices=["auto", *ALGORITHMS], default="auto",
-                        help="every run's algorithm (fista with --marks 300: today's default, for a paired count)")
     add_backend_option(parser)
     args = parser.parse_args(argv)
     Where.use(args.backend)
@@ -324,11 +320,10 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {"seed": seed, "size": size_text(args.size), "bands": args.bands, "marks": marks, "also": args.also,
-               "algorithm": args.algorithm, "backend": args.backend, "scenes": []}
+               "backend": args.backend, "scenes": []}
     print(f"panel seed {seed}", file=sys.stderr, flush=True)
     for i, plan in chosen:
-        results["scenes"].append({"index": i, **run_scene(plan, args.size, args.bands, marks, args.sweep, args.also,
-                                                                {"algorithm": args.algorithm})})
+        results["scenes"].append({"index": i, **run_scene(plan, args.size, args.bands, marks, args.sweep, args.also)})
         scene_done(i, plan, args.scenes)
         save_json(out, "panel", results)
     report(out, "panel", results, markdown(results))

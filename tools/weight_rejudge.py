@@ -79,16 +79,15 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         panels = [json.loads(Path(f).read_text()) for f in args.panels]
-        settings = {(p["seed"], p["size"], p["bands"], p["marks"] == AUTO, p["backend"], p.get("algorithm", "auto"))
-                    for p in panels}
+        settings = {(p["seed"], p["size"], p["bands"], p["marks"] == AUTO, p["backend"]) for p in panels}
         scenes = {i: checked(scene) for i, scene in merged(panels).items()}
         shape = size()(panels[0]["size"])
     except (OSError, ValueError, KeyError, TypeError, argparse.ArgumentTypeError) as error:
         parser.error(f"cannot read the panels: {error}")
-    (_, _, bands, to_stop, backend, algorithm), *others = settings
-    if others or not to_stop or backend != "numpy" or algorithm != "auto" or not scenes:
+    (_, _, bands, to_stop, backend), *others = settings
+    if others or not to_stop or backend != "numpy" or not scenes:
         parser.error("the panels must share one seed, size and bands, each run to its own stop (--marks auto) on "
-                     "NumPy by the default algorithm, as this tool solves")
+                     "NumPy, where this tool solves")
     lines = ["| # | kind | noise | mean/peak at 30 | τ then → now | default then | default now | weight margin |",
              "|---:|---|---|---:|---|---|---|---|"]
     verdicts = []
