@@ -95,6 +95,24 @@ def test_a_point_like_scene_in_good_light_takes_a_lighter_weight(noise, point_li
     assert rule.for_noise(noise, point_like) == pytest.approx(0.06 * noise * factor)
 
 
+@pytest.mark.parametrize("noise, widely_lit, factor", [
+    (0.003, True, 1.0),              # widely lit in good light: the rule as it is
+    (0.0135, True, 0.0135 / 0.0045),  # widely lit in low light: heavier by σ̂/σ1
+    (0.0135, False, 1.0),            # not widely lit: as it is
+])
+def test_a_widely_lit_scene_in_low_light_takes_a_heavier_weight(noise, widely_lit, factor):
+    rule = AutoWeight(start=3e-4, per_noise=0.06, lowest=1e-9, highest=1.0, point_noise=0.009, lit_noise=0.0045)
+    assert rule.for_noise(noise, widely_lit=widely_lit) == pytest.approx(0.06 * noise * factor)
+    assert rule._replace(lit_noise=None).for_noise(noise, widely_lit=widely_lit) == pytest.approx(0.06 * noise)
+
+
+def test_the_heavier_weight_keeps_the_ceiling_and_a_point_like_reading_comes_first():
+    rule = TotalVariation.auto_weight
+    assert rule.for_noise(0.02, widely_lit=True) == rule.highest < 0.06 * 0.02 * 0.02 / rule.lit_noise
+    assert rule.for_noise(0.003, True, True) == pytest.approx(rule.for_noise(0.003, True))
+    assert rule.for_noise(0.003, True) < rule.for_noise(0.003)
+
+
 def test_the_lighter_weight_keeps_the_floor_and_needs_a_point_noise():
     rule = AutoWeight(start=3e-4, per_noise=0.06, lowest=1e-4, highest=1.0, point_noise=0.009)
     assert rule.for_noise(0.003, True) == pytest.approx(1e-4)           # 0.06·0.003/3 = 6e-5, below the floor
@@ -123,6 +141,34 @@ def test_act_reads_how_point_like_the_iterate_is(cube, mean_over_peak, point_lik
         assert prior.relative < prior.auto_weight.for_noise(noise)
     assert ("a point-like scene" in stand_in.notes[0]) == point_like
     assert stand_in.told_point_like == point_like          # the algorithm is told, once
+
+
+def faint_field(level: float) -> np.ndarray:
+    """A field of ``level`` with one voxel at 1: p = (level·(N − 1) + 1)/N."""
+    cube = np.full((4, 32, 32), level)
+    cube[2, 16, 16] = 1.0
+    return cube
+
+
+def lit_fraction(cube: np.ndarray) -> float:
+    return float(cube.mean(dtype=float)) / float(cube.max())
+
+
+@pytest.mark.parametrize("cube, widely_lit_above, lit", [
+    (np.full((4, 32, 32), 0.5), 0.075, True),                    # p = 1
+    (np.full((4, 32, 32), 0.5), float("inf"), False),            # an algorithm without the threshold
+    (faint_field(0.05), 0.075, False),                           # p ≈ 0.05: between the two thresholds
+    (faint_field(0.05), lit_fraction(faint_field(0.05)), True),  # at the threshold
+])
+def test_act_raises_the_weight_of_a_widely_lit_scene_in_low_light(cube, widely_lit_above, lit):
+    weights = AutoWeights(build_priors(BACKEND, Settings(tv="auto"), lambda name: 1.0), 0.0025, None, widely_lit_above)
+    stand_in = Residual(sigma=0.01, cube=cube)        # σ̂ above the rule's σ1
+    weights.act(stand_in, stand_in)
+    prior, noise = weights.priors[0], weights.chosen["noise_estimate"]
+    assert noise > prior.auto_weight.lit_noise
+    assert prior.relative == pytest.approx(prior.auto_weight.for_noise(noise, widely_lit=lit))
+    assert (prior.relative > 2 * prior.auto_weight.for_noise(noise)) == lit
+    assert ("a widely lit scene" in stand_in.notes[0]) == lit and not stand_in.told_point_like
 
 
 def test_an_algorithm_without_a_threshold_is_never_point_like():
@@ -161,6 +207,23 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monk
     fista = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="fista")
     assert "mean_over_peak" not in fista.attrs
     assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))
+
+
+def test_a_solve_weighs_a_widely_lit_scene_in_low_light_more():
+    """Through the solver: a cube lit everywhere, in low light, reads as widely lit at ADMM's probe and takes the
+    heavier weight, its note saying so; FISTA reads nothing and keeps the noise rule."""
+    spectrum = np.linspace(0.5, 1.0, 8, dtype=np.float32)[:, None, None]
+    sim = simulate("lit", (48, 64), 8, seed=0, cube=spectrum * np.ones((8, 48, 64), np.float32),
+                   noise_var=1e-4, photons=2e3)
+    admm = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="admm")
+    noise, rule = admm.attrs["noise_estimate"], TotalVariation.auto_weight
+    assert admm.attrs["mean_over_peak"] >= Admm.widely_lit_above == 0.075 and noise > rule.lit_noise
+    assert admm.attrs["tv_chosen"] == pytest.approx(rule.for_noise(noise, widely_lit=True))
+    assert rule.for_noise(noise, widely_lit=True) > 1.5 * rule.for_noise(noise)
+    assert "a widely lit scene" in admm.attrs["skips"]
+    fista = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="fista")
+    assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))
+    assert "a widely lit scene" not in fista.attrs["skips"]
 
 
 @pytest.mark.parametrize("noise, per_pixel, lighter", [

@@ -60,6 +60,9 @@ class Algorithm:
     """The mean over the peak of its iterate at the auto weights' iteration below which ``auto`` takes the scene as
     point-like (:mod:`clsdcam.solve.auto_weights`); 0: never (the threshold is measured per algorithm, since each
     one's early iterate spreads the light differently)."""
+    widely_lit_above = math.inf
+    """The mean over the peak of the same iterate at or above which ``auto`` takes the scene as widely lit; ∞: never
+    (measured per algorithm, as ``point_like_below``; read only where that is set)."""
 
     backend: Any
     x: Any

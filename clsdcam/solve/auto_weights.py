@@ -16,7 +16,7 @@ blurrier. Below it, a rule with a ``point_noise`` lightens the weight in good li
 (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`). A warm start from a cube (``x0``) reads its own iterate there;
 a dark iterate counts as p = 1.
 
-Below it, too, the algorithm is told, and whether the scene is one of a few points, fewer than
+Below the threshold, too, the algorithm is told, and whether the scene is one of a few points, fewer than
 ``FEW_POINTS_PER_PIXEL`` lit voxels a window pixel (below), and whether it is one to lighten (below):
 ``Algorithm.point_like`` (ADMM lightens its non-negativity penalty, on a few points widens its TV thresholds, and on
 one to lighten lightens every penalty).
@@ -45,12 +45,22 @@ light").
 On small sensors, where a few points light enough of the frame for p to pass the threshold, the stop widens as
 before. Where the probe does not run (no auto weight, or an algorithm without a threshold) the tolerance stays.
 
+A second threshold on the same p, ``Algorithm.widely_lit_above``, marks a widely lit scene, the light of its iterate
+spread over the frame (ADMM: p at least 0.075, where the simulator's low-light real cubes read 0.082–0.147 at
+128×160×64). There a rule with a ``lit_noise`` σ1 makes the weight heavier in low light: it rises as σ̂² above σ1
+(:meth:`clsdcam.solve.priors.AutoWeight.for_noise`; docs/convergence.md, "A heavier weight for widely lit scenes in
+low light"). The threshold was measured at 128×160×64; on smaller sensors, where the early iterate spreads its light
+over more of the frame, more scenes pass it. A dark iterate (p = 1) counts as widely lit. It is measured only where
+the algorithm also has a point-like threshold (the probe's one reading).
+
 Why per pixel: at iteration 30 each point is still spread by the caustic, whose extent grows with the field, so a
 scene's n grows with the sensor: sixteen sources count 173–250 at 96×112, 265–448 at 112×144, 302–621 at 128×160
 and 551–655 at 160×192, but 0.015–0.030 lit voxels a pixel at every size. A gate of 500 lit voxels, set at the
 first two sizes, passed a sixteen-source scene of 621 at 128×160, which then stopped at the cap 3 dB short of its
 answer (docs/convergence.md, "A few points counted per pixel")."""
 from __future__ import annotations
+
+import math
 
 from .noise import residual_noise
 
@@ -88,6 +98,14 @@ def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool, boo
     return point_like, few_points, few_points and lighter_few_points(attrs["noise_estimate"], attrs["lit_per_pixel"])
 
 
+def widely_lit(attrs: dict, widely_lit_above: float) -> bool:
+    """Whether the probe's p (``mean_over_peak``) is at least the algorithm's ``widely_lit_above``: a scene whose light
+    spreads over most of its voxels, where the weight rises in low light (``AutoWeight.for_noise``). False where the
+    probe did not measure."""
+    p = attrs.get("mean_over_peak")
+    return p is not None and p >= widely_lit_above
+
+
 def lighter_few_points(noise: float, lit_per_pixel: float) -> bool:
     """A scene of a few points read in good light (σ̂ under GOOD_LIGHT_BELOW) and not of the fewest (at least
     FEWEST_POINTS_PER_PIXEL lit voxels a pixel): ADMM halves its penalties there, and the stop is wider."""
@@ -108,9 +126,11 @@ def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: b
 class AutoWeights:
     """The auto-weighted priors of one solve, chosen once at AUTO_AT."""
 
-    def __init__(self, priors: list, point_like_below: float = 0.0, wide_stop: float | None = None):
+    def __init__(self, priors: list, point_like_below: float = 0.0, wide_stop: float | None = None,
+                 widely_lit_above: float = math.inf):
         self.priors = priors
         self.point_like_below = point_like_below      # the algorithm's threshold on p (0: never point-like)
+        self.widely_lit_above = widely_lit_above      # and the one at or above which it is widely lit (∞: never)
         self.wide_stop = wide_stop                    # the stop's tolerance where p passes (None: it stays)
         self.chosen: dict = {}          # what was chosen, for the result's attributes
 
@@ -125,12 +145,13 @@ class AutoWeights:
         noise = self.chosen["noise_estimate"] = residual_noise(problem.backend.to_host(problem.residual(driver.x)))
         self._measure_likeness(problem, driver.x)
         point_like, few_points, lighter = probe_reading(self.chosen, self.point_like_below)
+        lit = widely_lit(self.chosen, self.widely_lit_above)
         for prior in (prior for prior in self.priors if prior.auto):
-            prior.set_relative(prior.auto_weight.for_noise(noise, point_like))
+            prior.set_relative(prior.auto_weight.for_noise(noise, point_like, lit))
             prior.auto = False
+            scene = "; a point-like scene" if point_like else "; a widely lit scene" if lit else ""
             driver.note(f"{prior.name}: auto, {prior.relative:.3g} (noise σ ≈ {noise:.3g} of max|b|, from the "
-                        f"residual at iteration {driver.iterations}" + ("; a point-like scene" if point_like else "")
-                        + ")")
+                        f"residual at iteration {driver.iterations}{scene})")
         driver.rescore(problem.objective)
         if point_like:
             driver.note(driver.algorithm.point_like(few_points, lighter))

@@ -18,7 +18,8 @@ and, once the measurement's noise level σ̂ (relative to max|b|) is known (:mod
 ``per_noise``·σ̂. A soft-thresholding denoiser's best threshold grows with the noise (the universal
 threshold is ∝ σ); ``per_noise`` is calibrated on the simulator's scenes (docs/benchmarks.md, "Choosing
 ``--tv``"). On a point-like scene (the algorithm's iterate at that point has its light in a few pixels,
-:mod:`clsdcam.solve.auto_weights`) it is ``per_noise``·σ̂·min(1, σ̂/``point_noise``).
+:mod:`clsdcam.solve.auto_weights`) it is ``per_noise``·σ̂·min(1, σ̂/``point_noise``); on a widely lit scene (the
+iterate's light spread over the frame) ``per_noise``·σ̂·max(1, σ̂/``lit_noise``).
 
 Adding a prior: one class (``prox``, ``value``, ``reference``; the math in its docstring) and one row
 of :data:`PRIORS` (the ``Settings`` field and the ``--flag`` are generated from the row), and one test.
@@ -42,14 +43,21 @@ class AutoWeight(NamedTuple):
     lowest: float
     highest: float
     point_noise: float | None = None    # σ0: on a point-like scene, the weight falls as σ̂² below it (None: it does not)
+    lit_noise: float | None = None      # σ1: on a widely lit scene, the weight rises as σ̂² above it (None: it doesn't)
 
-    def for_noise(self, noise: float, point_like: bool = False) -> float:
-        """per_noise·σ̂, times min(1, σ̂/σ0) on a point-like scene, kept within [lowest, highest].
+    def for_noise(self, noise: float, point_like: bool = False, widely_lit: bool = False) -> float:
+        """per_noise·σ̂, times min(1, σ̂/σ0) on a point-like scene and max(1, σ̂/σ1) on a widely lit one, kept within
+        [lowest, highest].
 
         A scene whose light sits in a few pixels and bands (narrow lines, point sources) wants a lighter weight in
         good light than the rule's σ̂ gives, and the same in low light (docs/convergence.md, "A lighter weight for
-        point-like scenes in good light")."""
-        factor = min(1.0, noise / self.point_noise) if point_like and self.point_noise else 1.0
+        point-like scenes in good light"). One whose light spreads over the frame (the real cubes) wants about the
+        same in good light and a heavier one in low light ("A heavier weight for widely lit scenes in low light")."""
+        factor = 1.0
+        if point_like and self.point_noise:
+            factor = min(1.0, noise / self.point_noise)
+        elif widely_lit and self.lit_noise:
+            factor = max(1.0, noise / self.lit_noise)
         return float(np.clip(self.per_noise * noise * factor, self.lowest, self.highest))
 
 
@@ -102,7 +110,8 @@ class TotalVariation(Prior):
 
     name = "tv"
     reference = "atb_max"
-    auto_weight = AutoWeight(start=3e-4, per_noise=0.06, lowest=3e-5, highest=3e-3, point_noise=0.009)
+    auto_weight = AutoWeight(start=3e-4, per_noise=0.06, lowest=3e-5, highest=3e-3, point_noise=0.009,
+                             lit_noise=0.0045)
     fusion = "subspace_tv"
 
     def __init__(self, backend, weight: float, settings):

@@ -72,7 +72,7 @@ class Reconstruction:
         driver = Driver(algorithm, rules, None if start.basis is not None else spaces.band.objective, observers)
         off = [row.name for row in PRIORS if row.name not in {p.name for p in priors}]
         driver.note(field_line(solver.geometry), self._bands_line(), terms_line(off))
-        weights = AutoWeights(priors, algorithm.point_like_below, s.wide_stop)
+        weights = AutoWeights(priors, algorithm.point_like_below, s.wide_stop, algorithm.widely_lit_above)
         phases = Phases(driver, spaces, s, iters or s.budget, (weights,), self._fit_rule(driver, stop_at_fit))
         reason = phases.run(start.warm, start.basis, start.core)
         weights.unchosen(driver)

@@ -61,6 +61,11 @@ BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis 
 # mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64
 # panels' lines scenes, 0.0035–0.21 on their other 80 (docs/convergence.md, "A lighter weight for point-like scenes")
 POINT_LIKE_BELOW = 0.0025
+# and at or above which it takes a scene as widely lit, whose weight rises in low light (TotalVariation.auto_weight's
+# lit_noise): 0.082–0.147 on four 128×160×64 panels' eight low-light real cubes, 0.068 and below on their other
+# low-light scenes but two natural ones (0.092, 0.173; docs/convergence.md, "A heavier weight for widely lit scenes in
+# low light")
+WIDELY_LIT_ABOVE = 0.075
 
 
 def penalties_for(split: "SplittingBase") -> "Penalties":
@@ -104,6 +109,7 @@ class Admm(Algorithm):
     band_space_only = True         # no splitting of a spectral subspace yet
     priors = ("tv", "l1")          # the priors it has a closed-form step for (band_steps)
     point_like_below = POINT_LIKE_BELOW
+    widely_lit_above = WIDELY_LIT_ABOVE
 
     def __init__(self, backend, x0, step: float, rules):
         super().__init__(backend, x0, step, rules)
