@@ -49,9 +49,9 @@ A second threshold on the same p, ``Algorithm.widely_lit_above``, marks a widely
 spread over the frame (ADMM: p at least 0.075, where the simulator's low-light real cubes read 0.082–0.147 at
 128×160×64). There a rule with a ``lit_noise`` σ1 makes the weight heavier in low light: it rises as σ̂² above σ1
 (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`; docs/convergence.md, "A heavier weight for widely lit scenes in
-low light"). The threshold was measured at 128×160×64; on smaller sensors, where the early iterate spreads its light
-over more of the frame, more scenes pass it. A dark iterate (p = 1) counts as widely lit. It is measured only where
-the algorithm also has a point-like threshold (the probe's one reading).
+low light"). The threshold was measured at 128×160×64; p is a lit fraction, which grows on smaller sensors for the
+point-like scenes, and what that does to this threshold is not measured. A dark iterate (p = 1) counts as widely lit.
+It is measured only where the algorithm also has a point-like threshold (the probe's one reading).
 
 Why per pixel: at iteration 30 each point is still spread by the caustic, whose extent grows with the field, so a
 scene's n grows with the sensor: sixteen sources count 173–250 at 96×112, 265–448 at 112×144, 302–621 at 128×160
@@ -100,8 +100,8 @@ def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool, boo
 
 def widely_lit(attrs: dict, widely_lit_above: float) -> bool:
     """Whether the probe's p (``mean_over_peak``) is at least the algorithm's ``widely_lit_above``: a scene whose light
-    spreads over most of its voxels, where the weight rises in low light (``AutoWeight.for_noise``). False where the
-    probe did not measure."""
+    spreads over the frame, where the weight rises in low light (``AutoWeight.for_noise``). False where the probe did
+    not measure."""
     p = attrs.get("mean_over_peak")
     return p is not None and p >= widely_lit_above
 
