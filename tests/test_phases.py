@@ -1,7 +1,6 @@
 """The phases of one solve (clsdcam.solve.phases): the driver run through the spaces for the solve's budget, hooks
 acting between iterations when due, and Ctrl-C ending the run with a reason."""
 import numpy as np
-import pytest
 
 from clsdcam.algorithms.fista import Fista
 from clsdcam.sim import simulate
