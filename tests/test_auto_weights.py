@@ -155,9 +155,9 @@ def lit_fraction(cube: np.ndarray) -> float:
 
 
 @pytest.mark.parametrize("cube, widely_lit_above, lit", [
-    (np.full((4, 32, 32), 0.5), 0.075, True),                    # p = 1
+    (np.full((4, 32, 32), 0.5), 0.063, True),                    # p = 1
     (np.full((4, 32, 32), 0.5), float("inf"), False),            # an algorithm without the threshold
-    (faint_field(0.05), 0.075, False),                           # p ≈ 0.05: between the two thresholds
+    (faint_field(0.05), 0.063, False),                           # p ≈ 0.05: between the two thresholds
     (faint_field(0.05), lit_fraction(faint_field(0.05)), True),  # at the threshold
 ])
 def test_act_raises_the_weight_of_a_widely_lit_scene_in_low_light(cube, widely_lit_above, lit):
@@ -217,7 +217,7 @@ def test_a_solve_weighs_a_widely_lit_scene_in_low_light_more():
                    noise_var=1e-4, photons=2e3)
     admm = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="admm")
     noise, rule = admm.attrs["noise_estimate"], TotalVariation.auto_weight
-    assert admm.attrs["mean_over_peak"] >= Admm.widely_lit_above == 0.075 and noise > rule.lit_noise
+    assert admm.attrs["mean_over_peak"] >= Admm.widely_lit_above == 0.063 and noise > rule.lit_noise
     assert admm.attrs["tv_chosen"] == pytest.approx(rule.for_noise(noise, widely_lit=True))
     assert rule.for_noise(noise, widely_lit=True) > 1.5 * rule.for_noise(noise)
     assert "a widely lit scene" in admm.attrs["skips"]

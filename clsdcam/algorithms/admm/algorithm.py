@@ -62,10 +62,11 @@ BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis 
 # panels' lines scenes, 0.0035–0.21 on their other 80 (docs/convergence.md, "A lighter weight for point-like scenes")
 POINT_LIKE_BELOW = 0.0025
 # and at or above which it takes a scene as widely lit, whose weight rises in low light (TotalVariation.auto_weight's
-# lit_noise): 0.082–0.147 on four 128×160×64 panels' eight low-light real cubes, 0.068 and below on their other
-# low-light scenes but two natural ones (0.092, 0.173; docs/convergence.md, "A heavier weight for widely lit scenes in
-# low light")
-WIDELY_LIT_ABOVE = 0.075
+# lit_noise): the geometric middle of the highest low-light scene measured to lose at the heavier weight (0.0586, a
+# natural scene) and the lowest measured to want it (0.068, a sparse one), at 128×160×64; the low-light real cubes
+# read 0.070–0.147 there (docs/convergence.md, "A heavier weight for widely lit scenes in low light", "A lower
+# threshold")
+WIDELY_LIT_ABOVE = 0.063
 
 
 def penalties_for(split: "SplittingBase") -> "Penalties":
