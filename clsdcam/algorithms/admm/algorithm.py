@@ -64,7 +64,7 @@ POINT_LIKE_BELOW = 0.0025
 # and at or above which it takes a scene as widely lit, whose weight rises in low light (TotalVariation.auto_weight's
 # lit_noise): the geometric middle of the highest low-light scene measured to lose at the heavier weight (0.0586, a
 # natural scene) and the lowest above it measured to want it (0.068, a sparse one), at 128×160×64, as measured when
-# it was set; thirty-three of thirty-four low-light real cubes read 0.070–0.147 there; measured since, below it one
+# it was set. Measured since: thirty-three of thirty-four low-light real cubes read 0.070–0.147 there; below it one
 # natural scene at 0.055 and one real cube at 0.058 want it too, and just over it a piecewise scene at 0.0630 loses
 # at it (docs/convergence.md, "A heavier weight for widely lit scenes in low light", "A lower widely lit threshold",
 # "Fresh scenes on the widely lit threshold's code")
