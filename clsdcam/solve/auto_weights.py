@@ -46,10 +46,10 @@ On small sensors, where a few points light enough of the frame for p to pass the
 before. Where the probe does not run (no auto weight, or an algorithm without a threshold) the tolerance stays.
 
 A second threshold on the same p, ``Algorithm.widely_lit_above``, marks a widely lit scene, the light of its iterate
-spread over the frame (ADMM: p at least 0.063, where thirty-three of the simulator's thirty-four low-light real
-cubes measured read 0.070–0.147 at 128×160×64, and the low-light natural scene that lost at the heavier weight
-0.0586; measured since, the thirty-fourth, at 0.058, wants the heavier weight but is under the threshold, and a
-low-light piecewise scene at 0.0630, just over it, loses at it). There a
+spread over the frame (ADMM: p at least 0.065, where thirty-three of the simulator's thirty-four low-light real
+cubes measured read 0.070–0.147 at 128×160×64, and the highest low-light scene measured to lose at the heavier
+weight, a piecewise one, 0.0630; the thirty-fourth real cube, at 0.058, wants the heavier weight but is under the
+threshold). There a
 rule with a ``lit_noise`` σ1 makes the weight heavier in low light: it rises as σ̂² above σ1
 (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`; docs/convergence.md, "A heavier weight for widely lit scenes in
 low light" and "A lower widely lit threshold"). The threshold was measured at 128×160×64; at 64×80 p moves both
