@@ -356,16 +356,17 @@ def test_new_penalties_leave_the_fixed_point_where_it_is(tiny, penalty):
 
 def test_the_balance_reads_the_rms_of_the_differences_along_each_active_axis():
     """rms(D_d w), summed one band at a time in w's precision, against the differences formed in float64: along λ
-    the last one 0, along y and x circular; only the active axes are read."""
-    w = RNG.random((5, 12, 16)).astype(np.float32) ** 3
-    exact = w.astype(np.float64)
-    differences = {0: np.concatenate([np.diff(exact, axis=0), np.zeros((1,) + w.shape[1:])]),
-                   1: np.roll(exact, -1, axis=1) - exact, 2: np.roll(exact, -1, axis=2) - exact}
-    for axes in ([0, 1, 2], [1, 2]):
-        rms = balance.difference_rms(types.SimpleNamespace(axes=axes), w)
-        assert sorted(rms) == axes
-        for axis in axes:
-            assert rms[axis] == pytest.approx(np.sqrt(np.mean(differences[axis] ** 2)), rel=1e-6)
+    the last one 0 (a single band: 0), along y and x circular; only the active axes are read."""
+    for bands, dtype, rel in ((5, np.float32, 1e-6), (5, np.float64, 1e-12), (1, np.float32, 1e-6)):
+        w = (RNG.random((bands, 12, 16)) ** 3).astype(dtype)
+        exact = w.astype(np.float64)
+        differences = {0: np.concatenate([np.diff(exact, axis=0), np.zeros((1,) + w.shape[1:])]),
+                       1: np.roll(exact, -1, axis=1) - exact, 2: np.roll(exact, -1, axis=2) - exact}
+        for axes in ([0, 1, 2], [1, 2]):
+            rms = balance.difference_rms(types.SimpleNamespace(axes=axes), w)
+            assert sorted(rms) == axes
+            for axis in axes:
+                assert rms[axis] == pytest.approx(np.sqrt(np.mean(differences[axis] ** 2)), rel=rel, abs=0.0)
 
 
 def test_the_balance_holds_each_axis_within_its_range_and_leaves_a_flat_axis(tiny):
