@@ -48,7 +48,7 @@ before. Where the probe does not run (no auto weight, or an algorithm without a 
 A second threshold on the same p, ``Algorithm.widely_lit_above``, marks a widely lit scene, the light of its iterate
 spread over the frame (ADMM: p at least 0.065, where forty-one of the simulator's forty-two low-light real
 cubes measured read 0.0699–0.147 at 128×160×64, and the highest low-light scene measured to lose at the heavier
-weight, a piecewise one, 0.0630; the thirty-fourth real cube, at 0.058, wants the heavier weight but is under the
+weight, a piecewise one, 0.0630; the other real cube, at 0.058, wants the heavier weight but is under the
 threshold). There a
 rule with a ``lit_noise`` σ1 makes the weight heavier in low light: it rises as σ̂² above σ1
 (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`; docs/convergence.md, "A heavier weight for widely lit scenes in

@@ -50,9 +50,9 @@ FLOOR_FEW_POINTS = 1.0 / 4096
 
 def difference_rms(split: SplittingBase, w: np.ndarray) -> dict[int, float]:
     """rms(D_d w) for each active TV axis: each band's differences in w's precision, their squares summed by one dot
-    product a band and the bands' sums in float64. (The whole cube's squares formed in float64 at once took a second
-    at full size on the host, by its timings most of the balance's time on a GPU, docs/convergence.md; this agrees
-    with them to about 1e-6.)"""
+    product a band and the bands' sums in float64. (The whole cube's squares formed in float64 at once took 0.5–2 s
+    at full size on the host, where the balance took 0.7–1.0 s of a GPU solve, docs/convergence.md, "The balance's
+    time on a GPU"; this agrees with them to about 1e-6.)"""
     out = np.empty_like(w[:1])
     return {axis: math.sqrt(sum(band_squares(w, axis, band, out) for band in range(len(w))) / w.size)
             for axis in split.axes}
