@@ -40,7 +40,9 @@ where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``
 :mod:`admm_acceleration`'s accelerations (host steps; "restarts" counts its restarts, dropped points or penalty
 changes). ``fista_start=N`` starts ADMM (duals zero) from N FISTA iterations' field, ``answer_start=N`` from N ADMM
 iterations' (the model's own answer: the bound on any start of the primal alone, a coarse-to-fine one included);
-"start" is what making it took, in the variant's own iterations' time.
+"start" is what making it took, in the variant's own iterations' time. ``duals=1`` (ξ) or ``2`` (every dual) sets
+the start's duals at their fixed-point values for its cube, ``refresh=N`` sets them so from the iterate at
+iteration N, ``rebalance=N`` balances the TV penalties again there (:mod:`admm_duals`; "restarts" counts them).
 """
 from __future__ import annotations
 
@@ -53,6 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from admm_acceleration import ACCELERATIONS, accelerated
+from admm_duals import DUAL_VARIANTS, dual_variants
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text, timed_run
 from bench_panel import (add_kinds_option, chosen_scenes, panel_scene, scene_indices, progress, scene_done,
                          scene_name)
@@ -205,7 +208,7 @@ ADMM_CONSTANTS = {"data": ("algorithm", "DATA"), "tv": ("algorithm", "TV"), "non
                   "alpha": ("algorithm", "RELAXATION"), "balance_at": ("algorithm", "BALANCE_AT"),
                   "balance": ("balance", "THRESHOLD_OVER_RMS"), "few_balance": ("balance", "THRESHOLD_FEW_POINTS")}
 STARTS = {"fista_start": "fista", "answer_start": "admm"}   # a start's name -> the algorithm that makes its cube
-VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS, *STARTS)  # the constants, the accelerations, the starts
+VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS, *STARTS, *DUAL_VARIANTS)   # and admm_duals' names
 
 
 def parse_variants(text: str) -> list[dict]:
@@ -257,7 +260,8 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
     for variant in args.variants:
         x0, start_seconds = variant_start(sim, tau, variant)
         told = {} if any(name in variant for name in ACCELERATIONS) else probe
-        with admm_constants(variant), accelerated(variant) as events, told_point_like(**told):
+        with admm_constants(variant), accelerated(variant) as events, dual_variants(variant, events), \
+                told_point_like(**told):
             result, seconds = timed_solve(sim, {"tv": tau, "iters": args.variant_iters, "algorithm": "admm"},
                                           range(10, args.variant_iters + 1, 10), x0)
         run = {"points": curve(sim, result), "change": [r["change"] for r in result.history]}
@@ -461,8 +465,9 @@ def main(argv=None) -> int:
             Settings(converge=args.converge)          # the package's own rule for --converge
         except InputError as error:
             parser.error(str(error))
-    if args.backend != "numpy" and any(set(v) & set(ACCELERATIONS) for v in args.variants):
-        parser.error("--variants momentum/anderson/spectral wrap the host steps: --backend numpy")
+    if args.backend != "numpy" and any(set(v) & {*ACCELERATIONS, *DUAL_VARIANTS} for v in args.variants):
+        parser.error("--variants momentum/anderson/spectral/duals/refresh/rebalance wrap the host steps: "
+                     "--backend numpy")
     Where.use(args.backend)
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
     chosen = chosen_scenes(parser, args, seed)
