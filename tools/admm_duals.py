@@ -8,15 +8,16 @@ split's optimality leaves (:func:`fixed_point_duals`, for the cube w ≥ 0 taken
 * the data split's, from the x-step: ξ_p = −f_p·(b_p − f_pᵀ(Hw)_p)/μ₁ on the sensor window;
 * the TV split's, from the soft threshold: η_d = t_d·sign(D_d w) where D_d w ≠ 0, in [−t_d, t_d] where it is 0,
   taken as t_d·clip(D_d w/(``SHARP``·t_d), −1, 1);
-* the non-negativity split's, from the v-step's optimality μ₁Hᵀξ + Σ_d μ₂,d D_dᵀη_d + μ₃ρ = 0: ρ = 0 where w > 0,
-  min(0, −(μ₁Hᵀξ + Σ_d μ₂,d D_dᵀη_d)/μ₃) where w = 0.
+* the non-negativity split's, from the c-step's optimality in v, μ₁Hᵀξ + Σ_d μ₂,d D_dᵀη_d + μ₃ρ = 0: ρ = 0 where
+  w > 0, min(0, −(μ₁Hᵀξ + Σ_d μ₂,d D_dᵀη_d)/μ₃) where w = 0.
 
 The start's duals are zero, and ADMM builds them at its penalties' pace: after its first x-step ξ is
 μ₁/(μ₁ + ‖f_p‖²), about a hundredth at the camera's μ₁, of its fixed-point value for the same residual. ``duals=1``
-(ξ alone) or ``duals=2`` (all three) sets them from the variant's start (its ``fista_start`` or ``answer_start``
-cube; from zero, ξ = −f·b/μ₁ sends the solve away); ``refresh=N`` sets them again from the iterate w at iteration N
-(``duals`` the kind, 1 if not named); ``rebalance=N`` balances the TV penalties again at iteration N
-(:func:`clsdcam.algorithms.admm.balance.balance`, from the iterate then). Host steps only (``--backend numpy``).
+(ξ, over the start's first split pass, which leaves η_d = clip(D_d v0, ±t_d) and ρ) or ``duals=2`` (all three)
+sets them from the variant's start (its ``fista_start`` or ``answer_start`` cube); ``refresh=N`` sets them again
+from the iterate w at iteration N (``duals`` the kind, 1 if not named); ``rebalance=N`` balances the TV penalties
+again at iteration N (:func:`clsdcam.algorithms.admm.balance.balance`, from the iterate then). Host steps only
+(``--backend numpy``).
 """
 from __future__ import annotations
 
