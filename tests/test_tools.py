@@ -442,7 +442,7 @@ def test_a_penalty_change_keeps_the_splits_and_the_unscaled_duals(monkeypatch):
     assert checked == [True] * 6
 
 
-def test_the_fixed_point_data_dual_is_the_one_admm_converges_to():
+def test_the_fixed_point_data_dual_is_the_one_admm_converges_to(monkeypatch):
     """ξ set from the iterate w by its fixed-point value, −f·(b − fᵀHw)/μ₁, is what ADMM's own ξ approaches as the
     solve converges (relative distance 2.0 after 200 iterations, 0.04 after 3000 on this scene); the splits it
     leaves are w's (x = Hw) and the c-step's right-hand side x − ξ."""
@@ -466,14 +466,10 @@ def test_the_fixed_point_data_dual_is_the_one_admm_converges_to():
         np.testing.assert_allclose(derived.hv[:, :h, :w], derived.x[:, :h, :w] - derived.xi, rtol=1e-5, atol=1e-6)
         return float(np.linalg.norm(derived.xi - state.xi) / np.linalg.norm(state.xi))
 
-    monkeypatch = pytest.MonkeyPatch()
     monkeypatch.setattr(SplittingBase, "iterate", iterate)
     plan = bench_panel.scene_plan(1, 3, ["piecewise"])[0]
     sim = bench_panel.panel_scene(plan, (24, 32), 4)
-    try:
-        early, late = distance(200), distance(3000)
-    finally:
-        monkeypatch.undo()
+    early, late = distance(200), distance(3000)
     assert late < 0.1 and late < early / 10
 
 

@@ -53,7 +53,8 @@ def fixed_point_duals(split, state, w: np.ndarray, kind: int = EVERY_DUAL) -> No
         state.s[i] = d - state.eta[i]
     pushed = np.zeros_like(w)
     pushed[:, :h, :wd] = state.xi
-    gradient = p.data * scipy.fft.irfft2(scipy.fft.rfft2(pushed) * np.conj(split.transfer), s=split.field_shape)
+    _, data_transfer, _ = split.terms.for_penalties(p, split.axes)        # μ₁conj(Ĥ), the c-step's own
+    gradient = scipy.fft.irfft2(scipy.fft.rfft2(pushed) * data_transfer, s=split.field_shape)
     for i, axis in enumerate(split.axes):
         difference_adjoint_add(state.eta[i], axis, p.tv_along(axis), gradient)
     state.rho[...] = np.where(w > 0, 0, np.minimum(0, -gradient / p.nonneg))
