@@ -5,14 +5,16 @@ import numpy as np
 import pytest
 
 from clsdcam.algorithms.admm import Admm, balance
-from clsdcam.algorithms.admm.algorithm import LIGHTER_FEW_POINTS, NONNEG, NONNEG_FEW_POINTS, TV
+from clsdcam.algorithms.admm.algorithm import LIGHTER_FEW_POINTS, NONNEG, NONNEG_FEW_POINTS, NONNEG_POINT_LIKE, TV
+from clsdcam.solve import auto_weights
 from clsdcam.solve.auto_weights import (AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, FEWEST_POINTS_PER_PIXEL,
-                                        GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS_STOP, AutoWeights, auto_tolerance,
-                                        probe_reading)
+                                        GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS_STOP, RECOUNT_AT, SPOTS_FROM, AutoWeights,
+                                        auto_tolerance, probe_reading)
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.sim import simulate
 from clsdcam.solve import settings
+from clsdcam.solve.convergence import FIRST_READING
 from clsdcam.solve.priors import AutoWeight, TotalVariation, build_priors
 from clsdcam.solve.driver import Driver, Rules
 from clsdcam.solve.settings import CONVERGE, CONVERGE_WIDE, Settings
@@ -49,7 +51,7 @@ class Residual:
         self.residual_buffer = np.random.default_rng(0).normal(0, sigma, (256, 256))
         self.x, self.iterations, self.rescored, self.notes = None, AUTO_AT, [], []
         self.cube, self.model, self.algorithm, self.told_point_like = cube, self, self, 0
-        self.told_few_points = None
+        self.told_few_points, self.rerouted = None, []
 
     def solution(self, x):
         return self.cube
@@ -73,6 +75,12 @@ class Residual:
         self.told_point_like += 1
         self.told_few_points, self.told_lighter = few_points, lighter
         return "stand-in: told"
+
+    def lit_spots(self):
+        return "stand-in: spots"
+
+    def reroute(self, line):
+        self.rerouted.append(line)
 
 
 def test_act_chooses_from_the_noise_and_rescores():
@@ -285,6 +293,42 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tol
     assert said is None or stops[0].startswith(f"stop: --converge auto, {tolerance:.2g} (")
 
 
+@pytest.mark.parametrize("wide_stop", [CONVERGE_WIDE, None])
+@pytest.mark.parametrize("lit", [SPOTS_FROM, SPOTS_FROM - 1])
+def test_a_few_points_counted_again_as_lit_spots_tell_the_algorithm_and_take_back_the_stop(lit, wide_stop):
+    """A scene read as a few points at AUTO_AT (120 lit voxels, low light) is counted again at RECOUNT_AT, and only
+    then: SPOTS_FROM lit voxels or more are lit spots, said in a note, the algorithm told (``lit_spots``, its line
+    rerouting the driver), and a stop --converge auto narrowed (``wide_stop`` set) back to the tolerance it had;
+    fewer change nothing. Without --converge auto the stop never moves, but the algorithm is told all the same. The
+    count is kept either way, and nothing more is due."""
+    weights, stand_in = hook(point_like_below=0.0025, wide_stop=wide_stop), Residual(cube=lit_voxels(120))
+    weights.act(stand_in, stand_in)
+    narrowed = CONVERGE * FEW_POINTS_STOP if wide_stop else CONVERGE
+    assert stand_in.rules.converge == pytest.approx(narrowed, rel=1e-12)
+    assert weights.due_in(AUTO_AT, RECOUNT_AT - AUTO_AT) == RECOUNT_AT - AUTO_AT
+    assert weights.due_in(AUTO_AT, RECOUNT_AT - AUTO_AT - 1) is None and weights.due_in(RECOUNT_AT, 100) is None
+    stand_in.cube, stand_in.iterations = lit_voxels(lit), RECOUNT_AT
+    weights.act(stand_in, stand_in)
+    assert weights.chosen["lit_voxels_recounted"] == pytest.approx(lit, rel=1e-12)
+    assert weights.chosen["lit_voxels"] == pytest.approx(120, rel=1e-12)        # the first count is kept
+    spots = lit >= SPOTS_FROM
+    assert stand_in.rules.converge == pytest.approx(CONVERGE if spots else narrowed, rel=1e-12)
+    assert stand_in.rerouted == (["stand-in: spots"] if spots else [])      # what the algorithm said
+    said = [line for line in stand_in.notes if "lit spots" in line]
+    recounted = f"recount: lit spots, not a few points ({lit} lit voxels at iteration {RECOUNT_AT} ≥ {SPOTS_FROM})"
+    stop = f"stop: --converge auto, {CONVERGE:g} (lit spots)"
+    assert said == ([recounted] + ([stop] if wide_stop else []) if spots else [])
+    assert weights.due_in(0, 10_000) is None
+
+
+@pytest.mark.parametrize("cube", [np.full((4, 32, 32), 0.5), lit_voxels(656, MANY)])
+def test_no_recount_where_the_stop_did_not_narrow(cube):
+    """A spread scene, or a point-like one of more than a few points, is never counted again."""
+    weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
+    weights.act(stand_in, stand_in)
+    assert weights.due_in(AUTO_AT, 10_000) is None and "lit_voxels_recounted" not in weights.chosen
+
+
 @pytest.mark.parametrize("point_like_below, wide_stop", [(0.0, CONVERGE_WIDE), (0.0025, None)])
 def test_the_stop_stays_without_a_probe_or_without_auto(point_like_below, wide_stop):
     """An algorithm without a threshold reads nothing, so the stop stays; so it does with a --converge of the user's."""
@@ -338,3 +382,32 @@ def test_a_solve_widens_its_stop_on_a_spread_scene_and_narrows_it_on_a_few_point
     assert kept.attrs["stop_tolerance"] == 0.07 and kept.iterations > wide.iterations
     warm = Solver(spread.calibration).solve(spread.measurement, state=wide.state)       # weights carried: no probe
     assert "mean_over_peak" not in warm.attrs and warm.attrs["stop_tolerance"] == CONVERGE
+
+
+def test_a_solve_counts_a_few_points_again_at_recount_at(monkeypatch):
+    """Through the solver, --iters auto: three points narrow the stop at AUTO_AT and are counted again at RECOUNT_AT,
+    gathered to about three lit voxels by then (kept in the attributes), under SPOTS_FROM: the penalties stay. With
+    SPOTS_FROM at 1 the same count reads lit spots: ADMM takes a point-like scene's penalties there (μ₃ at
+    NONNEG_POINT_LIKE of μ₂'s scale, the TV balanced again with the spread scenes' C), the estimate starts afresh
+    (no stop before RECOUNT_AT + FIRST_READING), and the stop goes back to CONVERGE and fires (under a cap of 800)."""
+    points = np.zeros((8, 48, 64), np.float32)
+    for band, y, x in ((1, 20, 20), (4, 30, 40), (6, 15, 45)):
+        points[band, y, x] = 1.0
+    sim = simulate("points", (48, 64), 8, seed=0, cube=points)
+    monkeypatch.setattr(settings, "AUTO_CAP", 400)
+    told, real = [], balance.balance
+    monkeypatch.setattr(balance, "balance", lambda *a: told.append(a[3:] == (True,)) or real(*a))
+    few = reconstruct(sim.measurement, sim.calibration)
+    assert told == [True] and "lit spots" not in few.attrs["skips"]
+    assert few.attrs["lit_voxels_recounted"] == pytest.approx(3, abs=0.5) and SPOTS_FROM > 3     # gathered
+    assert few.attrs["stop_tolerance"] == pytest.approx(CONVERGE * FEW_POINTS_STOP, rel=1e-12)
+    monkeypatch.setattr(auto_weights, "SPOTS_FROM", 1)
+    monkeypatch.setattr(settings, "AUTO_CAP", 800)
+    spots = reconstruct(sim.measurement, sim.calibration)
+    assert spots.attrs["lit_voxels_recounted"] == pytest.approx(few.attrs["lit_voxels_recounted"], rel=1e-6)
+    assert told == [True, True, False]     # the few points' balance at BALANCE_AT, the spread ones' at the recount
+    penalties = spots.state.carry[0].penalties
+    assert penalties.nonneg / penalties.tv == pytest.approx(NONNEG_POINT_LIKE / TV, rel=1e-12)
+    assert f"at iteration {RECOUNT_AT} ≥ 1)" in spots.attrs["skips"] and "TV balanced again" in spots.attrs["skips"]
+    assert spots.attrs["stop_tolerance"] == CONVERGE and spots.stop_reason == "converged"
+    assert RECOUNT_AT + FIRST_READING <= spots.iterations < 800

@@ -26,7 +26,7 @@ import weight_factors  # noqa: E402
 import weight_oracles  # noqa: E402
 import weight_rejudge  # noqa: E402
 from clsdcam.metrics import psnr, spectral_angle  # noqa: E402
-from clsdcam.solve.auto_weights import AUTO_AT  # noqa: E402
+from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT  # noqa: E402
 from clsdcam.solve.convergence import FIRST_READING, WINDOW  # noqa: E402
 from clsdcam.algorithms.admm import Admm  # noqa: E402
 from clsdcam.solve import settings  # noqa: E402
@@ -332,8 +332,9 @@ def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_
     after AUTO_AT iterations, as the default's does on a point-like scene, and told a few points to
     NONNEG_FEW_POINTS/NONNEG, its TV balance at that iteration taking the wider thresholds; told a few points in good
     light and not of the fewest (``lighter``), μ₁ and μ₃ are then LIGHTER_FEW_POINTS of those and the balance sets
-    the same μ₂,d (its thresholds are the iterate's); not told, or before that iteration, or after the context, it
-    keeps its penalties."""
+    the same μ₂,d (its thresholds are the iterate's); told lit spots as well, after RECOUNT_AT iterations μ₁ is the
+    camera's again and μ₃ NONNEG_POINT_LIKE of μ₂'s scale (``Admm.lit_spots``); not told, or before that iteration,
+    or after the context, it keeps its penalties."""
     from clsdcam.algorithms.admm import algorithm
     from clsdcam.sim import simulate
 
@@ -347,7 +348,8 @@ def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_
         return result.state.carry[0].penalties
 
     kept, point_like = penalties(AUTO_AT + 2), penalties(AUTO_AT + 2, point_like=True)
-    few = penalties(AUTO_AT + 2, point_like=True, few_points=True)
+    few_told = {"point_like": True, "few_points": True}
+    few = penalties(AUTO_AT + 2, **few_told)
     assert point_like.nonneg == pytest.approx(kept.nonneg * algorithm.NONNEG_POINT_LIKE / algorithm.NONNEG, rel=1e-12)
     assert few.nonneg == pytest.approx(kept.nonneg * algorithm.NONNEG_FEW_POINTS / algorithm.NONNEG, rel=1e-12)
     assert few.nonneg < point_like.nonneg and point_like.tv_balance == kept.tv_balance
@@ -358,6 +360,10 @@ def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_
     assert [bright.tv_along(axis) for axis in range(3)] == pytest.approx([few.tv_along(axis) for axis in range(3)],
                                                                          rel=1e-9)
     assert penalties(AUTO_AT, point_like=True).nonneg == kept.nonneg
+    spots = penalties(RECOUNT_AT + 1, point_like=True, few_points=True, lighter=True, spots=True)
+    assert spots.nonneg / spots.tv == pytest.approx(algorithm.NONNEG_POINT_LIKE / algorithm.TV, rel=1e-12)
+    assert spots.data == pytest.approx(kept.data, rel=1e-12)           # the camera's again: no longer lightened
+    assert penalties(RECOUNT_AT, point_like=True, few_points=True, spots=True) == penalties(RECOUNT_AT, **few_told)
     assert Admm.iterate is plain
 
 

@@ -64,7 +64,7 @@ from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
-from clsdcam.solve.auto_weights import AUTO_AT, probe_reading
+from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, SPOTS_FROM, probe_reading
 from clsdcam.solve.convergence import DistanceEstimate
 from clsdcam.solve.solver import Settings
 
@@ -90,7 +90,8 @@ def final_point(sim, result, seconds: float) -> dict:
             "seconds": seconds, "iterations": result.iterations, "stop_reason": result.stop_reason,
             "estimate": result.attrs.get("distance_estimate"), "tolerance": result.attrs.get("stop_tolerance"),
             "mean_over_peak": result.attrs.get("mean_over_peak"), "lit_voxels": result.attrs.get("lit_voxels"),
-            "lit_per_pixel": result.attrs.get("lit_per_pixel")}
+            "lit_per_pixel": result.attrs.get("lit_per_pixel"),
+            "lit_voxels_recounted": result.attrs.get("lit_voxels_recounted")}
 
 
 def curve(sim, result) -> list[dict]:
@@ -113,20 +114,24 @@ def reference_cube(sim, plan: dict, tau: float, algorithm: str, iters: int, cach
 
 def scene_weight(sim, weight_from: str) -> tuple[float, dict]:
     """(τ, probe): the weight today's run (``weight_from`` "today") or the default's ``--tv auto`` chose, and what
-    that run's probe tells ADMM, :func:`told_point_like`'s arguments (FISTA's run reads no probe: nothing)."""
+    that run's probe and its recount tell ADMM, :func:`told_point_like`'s arguments (FISTA's run reads no probe:
+    nothing)."""
     weight_run, _ = timed_solve(sim, TODAY if weight_from == "today" else {})
     point_like, few_points, lighter = probe_reading(weight_run.attrs, POINT_LIKE_BELOW)
+    spots = weight_run.attrs.get("lit_voxels_recounted", 0.0) >= SPOTS_FROM
     return float(weight_run.attrs["tv_chosen"]), {"point_like": point_like, "few_points": few_points,
-                                                  "lighter": lighter}
+                                                  "lighter": lighter, "spots": spots}
 
 
 @contextmanager
-def told_point_like(point_like: bool = False, few_points: bool = False, lighter: bool = False):
+def told_point_like(point_like: bool = False, few_points: bool = False, lighter: bool = False, spots: bool = False):
     """While it lasts, where ``point_like``, every ADMM solve is told so before its iteration AUTO_AT + 1 (and
     whether the scene is ``few_points``, and one to make ``lighter``), as the default's probe tells it
-    (``Admm.point_like``): a run at a given weight reads no probe, so without this it would keep the penalties of the
-    spread scenes where the default's change. Only for solves at a given weight: a solve with ``--tv auto`` reads its
-    own probe and would be told twice."""
+    (``Admm.point_like``), and where a few points were recounted as lit ``spots``, that before its iteration
+    RECOUNT_AT + 1 (``Admm.lit_spots``): a run at a given weight reads no probe, so without this it would keep the
+    penalties of the spread scenes where the default's change. (A stop replayed on such a run forgets its windows at
+    AUTO_AT alone, :func:`replay_stop`, where the default's also does at the recount.) Only for solves at a given
+    weight: a solve with ``--tv auto`` reads its own probe and would be told twice."""
     from clsdcam.algorithms.admm.algorithm import Admm
 
     plain = Admm.iterate
@@ -134,6 +139,8 @@ def told_point_like(point_like: bool = False, few_points: bool = False, lighter:
     def iterate(algorithm, problem):
         if algorithm._iterations == AUTO_AT:
             algorithm.point_like(few_points, lighter)
+        if algorithm._iterations == RECOUNT_AT and few_points and spots:
+            algorithm.lit_spots()
         return plain(algorithm, problem)
 
     Admm.iterate = iterate if point_like else plain

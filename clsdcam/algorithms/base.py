@@ -94,6 +94,12 @@ class Algorithm:
         non-negativity penalty, on a few points wider TV thresholds, and every penalty lighter where told) and
         returns a line for the solve's notes that says what it did. Nothing by default (None)."""
 
+    def lit_spots(self) -> str | None:
+        """The scene :meth:`point_like` was told is of a few points was counted again later and is one of lit spots
+        (:mod:`clsdcam.solve.auto_weights`, its recount): an algorithm that took a setting for a few points takes the
+        one for a point-like scene instead (ADMM: its penalties for one, the TV balanced again) and returns a line
+        that says so. Nothing by default (None)."""
+
     def carry(self):
         """What a video's next frame resumes from besides its iterate (:class:`clsdcam.solve.state.SolverState`), or
         None: an algorithm with more state than its iterates (ADMM's splits and duals) returns it. Its ``moved()``

@@ -42,6 +42,16 @@ pixel), the sixteen sources rather than two points. There ADMM halves its penalt
 scenes, halved, needed 0.01, and one in low light ended 0.25 dB short at 0.02 ("A wider stop for a few points in good
 light").
 
+A scene counted as a few points is counted again at ``RECOUNT_AT``, the first iteration the stop can fire (the
+attribute ``lit_voxels_recounted``). By then ADMM has gathered each point into about its own voxel: the simulator's
+sixteen sources count 17–35 and two points 4–21 (120×152 to 144×176), where the narrow-line spots of its lines
+scenes, which at AUTO_AT count as few as sixteen sources do, still count 88–367 (128×160). From ``SPOTS_FROM`` lit
+voxels the scene is one of lit spots: the algorithm takes its setting for a point-like scene instead
+(``Algorithm.lit_spots``; ADMM its point-like penalties, the TV balanced again), the estimate forgets its windows where
+that changed the iteration, and the stop goes back to the tolerance it narrowed. Counted in voxels, not per pixel:
+gathered, a point is one voxel whatever the sensor, where the spots grow with the field (docs/convergence.md, "A few
+points counted again").
+
 On small sensors, where a few points light enough of the frame for p to pass the threshold, the stop widens as
 before. Where the probe does not run (no auto weight, or an algorithm without a threshold) the tolerance stays.
 
@@ -65,6 +75,7 @@ from __future__ import annotations
 
 import math
 
+from .convergence import FIRST_READING
 from .noise import residual_noise
 
 AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
@@ -85,6 +96,14 @@ LIGHTER_FEW_POINTS_STOP = 0.4
 # the noise σ̂ (of max|b|) under which the probe reads good light: 0.0022–0.0044 on the simulator's standard-light
 # points and sources (96×112 to 160×192), 0.0057–0.0106 in its low light
 GOOD_LIGHT_BELOW = 0.005
+# a scene counted as a few points at AUTO_AT is counted again here, the first iteration the stop can fire (the estimate
+# forgot its windows at AUTO_AT and reads after FIRST_READING)
+RECOUNT_AT = AUTO_AT + FIRST_READING
+# lit voxels (sum/peak over the window) at RECOUNT_AT from which such a scene is one of lit spots, its stop back to
+# --converge: ADMM has gathered the simulator's sixteen sources into 17–35 and two points into 4–21 by then (120×152 to
+# 144×176), the narrow-line spots counted as a few points at AUTO_AT into 104–367 (128×160; docs/convergence.md, "A
+# few points counted again")
+SPOTS_FROM = 64
 # lit voxels a window pixel under which a scene of a few points is of the fewest: the simulator's two-point scenes count
 # 0.003–0.009, its sixteen sources 0.0136–0.030 at every size measured (96×112 to 160×192)
 FEWEST_POINTS_PER_PIXEL = 0.012
@@ -126,6 +145,14 @@ def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: b
     return converge
 
 
+def window_reading(problem, x) -> tuple[float, int, int]:
+    """(p, voxels, bands) of the iterate ``x``'s sensor window: its mean over its peak (1 where it is dark), its
+    voxels and its bands."""
+    window = problem.model.window(problem.solution(x))
+    peak = float(window.max())
+    return (float(window.mean(dtype=float)) / peak if peak > 0 else 1.0), window.size, window.shape[0]
+
+
 class AutoWeights:
     """The auto-weighted priors of one solve, chosen once at AUTO_AT."""
 
@@ -136,13 +163,28 @@ class AutoWeights:
         self.widely_lit_above = widely_lit_above      # and the one at or above which it is widely lit (∞: never)
         self.wide_stop = wide_stop                    # the stop's tolerance where p passes (None: it stays)
         self.chosen: dict = {}          # what was chosen, for the result's attributes
+        self._recount_due = False       # a few points read at AUTO_AT, not yet counted again
+        self._narrowed_from: float | None = None   # the stop's tolerance before a few points narrowed it
 
     def due_in(self, done: int, iters: int) -> int | None:
-        """Iterations from ``done`` until the hook acts, when that is within the next ``iters``; else None."""
-        pending = any(prior.auto for prior in self.priors)
-        return AUTO_AT - done if pending and done < AUTO_AT <= done + iters else None
+        """Iterations from ``done`` until the hook acts (at AUTO_AT while a weight is pending, at RECOUNT_AT while a
+        recount is due), when that is within the next ``iters``; else None."""
+        if any(prior.auto for prior in self.priors):
+            at = AUTO_AT
+        elif self._recount_due:
+            at = RECOUNT_AT
+        else:
+            return None
+        return at - done if done < at <= done + iters else None
 
     def act(self, problem, driver) -> None:
+        """The weights chosen (:meth:`choose`) while one is pending, else the recount (:meth:`recount`)."""
+        if any(prior.auto for prior in self.priors):
+            self.choose(problem, driver)
+        else:
+            self.recount(problem, driver)
+
+    def choose(self, problem, driver) -> None:
         """Choose from the noise σ̂ of the residual at the driver's iterate, noted to its observers; the driver
         rescores under the new F."""
         noise = self.chosen["noise_estimate"] = residual_noise(problem.backend.to_host(problem.residual(driver.x)))
@@ -158,6 +200,7 @@ class AutoWeights:
         driver.rescore(problem.objective)
         if point_like:
             driver.note(driver.algorithm.point_like(few_points, lighter))
+        self._recount_due = few_points
         if self.wide_stop and "mean_over_peak" in self.chosen:
             self._tune_stop(driver, point_like, few_points, lighter)
 
@@ -171,11 +214,30 @@ class AutoWeights:
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "
                         f"{p:.2g} ≥ {self.point_like_below:g})")
         elif few_points:
+            self._narrowed_from = driver.rules.converge
             driver.narrow_stop(tolerance)
             light = (f"; in good light, noise {self.chosen['noise_estimate']:.2g} < {GOOD_LIGHT_BELOW:g}, and not of "
                      f"the fewest, ≥ {FEWEST_POINTS_PER_PIXEL:g} a pixel") if lighter else ""
             driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a point-like scene of few lit voxels: "
                         f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g}{light})")
+
+    def recount(self, problem, driver) -> None:
+        """At RECOUNT_AT on a scene the probe read as a few points: its lit voxels n counted again (the attribute
+        ``lit_voxels_recounted``). From SPOTS_FROM the scene is one of lit spots, said in a note: the algorithm takes
+        its setting for a point-like scene (``Algorithm.lit_spots``; the estimate forgets its windows where that
+        changed the iteration), and a stop narrowed for a few points goes back to the tolerance it had (the module
+        docstring)."""
+        self._recount_due = False
+        p, voxels, _ = window_reading(problem, driver.x)
+        n = self.chosen["lit_voxels_recounted"] = p * voxels
+        if n < SPOTS_FROM:
+            return
+        driver.note(f"recount: lit spots, not a few points ({n:.0f} lit voxels at iteration {driver.iterations} ≥ "
+                    f"{SPOTS_FROM})")
+        driver.reroute(driver.algorithm.lit_spots())
+        if self._narrowed_from is not None:
+            driver.widen_stop(self._narrowed_from)
+            driver.note(f"stop: --converge auto, {driver.rules.converge:g} (lit spots)")
 
     def _measure_likeness(self, problem, x) -> None:
         """The iterate's window's p = mean/max, kept as the attribute ``mean_over_peak``, n = p times the window's
@@ -183,11 +245,10 @@ class AutoWeights:
         measured where the algorithm's threshold is 0."""
         if not self.point_like_below:
             return
-        window = problem.model.window(problem.solution(x))
-        peak = float(window.max())
-        self.chosen["mean_over_peak"] = float(window.mean(dtype=float)) / peak if peak > 0 else 1.0
-        self.chosen["lit_voxels"] = self.chosen["mean_over_peak"] * window.size
-        self.chosen["lit_per_pixel"] = self.chosen["mean_over_peak"] * window.shape[0]      # n/(H·W) = p·K
+        p, voxels, bands = window_reading(problem, x)
+        self.chosen["mean_over_peak"] = p
+        self.chosen["lit_voxels"] = p * voxels
+        self.chosen["lit_per_pixel"] = p * bands      # n/(H·W) = p·K
 
     def unchosen(self, driver) -> None:
         """Say, for each weight still pending after the driver's solve (fewer than AUTO_AT iterations), that the

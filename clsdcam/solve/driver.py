@@ -140,6 +140,13 @@ class Driver:
         self.checkpoints.rescore(objective)
         self.estimate.restart()
 
+    def reroute(self, line: str | None):
+        """The algorithm's iteration changed between two iterations (e.g. new penalties), said in ``line``: the
+        distance estimate forgets the steps of the old road (None: nothing changed, nothing forgotten)."""
+        if line is not None:
+            self.note(line)
+            self.estimate.restart()
+
     def _iteration(self, problem, last: bool) -> dict:
         k = self.iterations + 1
         numbers = self.algorithm.iterate(problem)

@@ -14,7 +14,9 @@ iteration), the non-negativity split's drops to ``NONNEG_POINT_LIKE``, and on a 
 ``NONNEG_FEW_POINTS`` while the balance widens its thresholds; on a scene of a few points in good light (the probe's
 noise σ̂ under ``GOOD_LIGHT_BELOW`` of max|b|) every penalty is then ``LIGHTER_FEW_POINTS`` of itself, unless
 the scene is of the fewest points, under ``FEWEST_POINTS_PER_PIXEL`` lit voxels a window pixel (both the probe's:
-:func:`clsdcam.solve.auto_weights.lighter_few_points`; :meth:`Admm.point_like`).
+:func:`clsdcam.solve.auto_weights.lighter_few_points`; :meth:`Admm.point_like`). A scene of a few points that the
+probe's recount finds to be one of lit spots takes a point-like scene's penalties from there, its TV balanced again
+(:meth:`Admm.lit_spots`).
 
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
@@ -190,6 +192,23 @@ class Admm(Algorithm):
             said += f"; every penalty × {LIGHTER_FEW_POINTS:g} (in good light, not of the fewest points)"
         repenalise(self.splitting, self.state, self.backend, new)
         return said
+
+    def lit_spots(self) -> str | None:
+        """The scene told to be of a few points is one of lit spots (the probe's recount): from here on the penalties
+        of a point-like scene, the camera's (:func:`penalties_for`) with μ₃ at ``NONNEG_POINT_LIKE``, and the TV split
+        balanced again from the iterate with the spread scenes' C and floor (:func:`.balance.balance`), the duals
+        carried over (:func:`.balance.repenalise`). Returns the line that says so (None before the first
+        iteration)."""
+        self._few_points = False
+        if self.state is None:
+            return None
+        from .balance import balance, repenalise
+
+        camera = penalties_for(self.splitting)
+        repenalise(self.splitting, self.state, self.backend,
+                   replace(camera, nonneg=camera.nonneg * NONNEG_POINT_LIKE / NONNEG))
+        balance(self.splitting, self.state, self.backend)
+        return f"admm: μ₃ × {NONNEG_POINT_LIKE / NONNEG:g} of the camera's, TV balanced again (lit spots)"
 
     def carry(self):
         """What the next frame's solve resumes from: the splits and duals (None before the first iteration)."""
