@@ -322,7 +322,7 @@ def test_a_few_points_counted_again_as_lit_spots_tell_the_algorithm_and_take_bac
 
 
 @pytest.mark.parametrize("cube", [np.full((4, 32, 32), 0.5), lit_voxels(656, MANY)])
-def test_no_recount_where_the_stop_did_not_narrow(cube):
+def test_no_recount_on_a_spread_scene_or_on_many_points(cube):
     """A spread scene, or a point-like one of more than a few points, is never counted again."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)

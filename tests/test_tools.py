@@ -363,6 +363,7 @@ def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_
     spots = penalties(RECOUNT_AT + 1, point_like=True, few_points=True, lighter=True, spots=True)
     assert spots.nonneg / spots.tv == pytest.approx(algorithm.NONNEG_POINT_LIKE / algorithm.TV, rel=1e-12)
     assert spots.data == pytest.approx(kept.data, rel=1e-12)           # the camera's again: no longer lightened
+    assert spots.tv_balance is not None and spots.tv_balance != few.tv_balance      # balanced again, C = 2
     assert penalties(RECOUNT_AT, point_like=True, few_points=True, spots=True) == penalties(RECOUNT_AT, **few_told)
     assert Admm.iterate is plain
 

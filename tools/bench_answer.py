@@ -9,8 +9,8 @@ Per scene, the default's solve (ADMM, ``--tv auto`` and its probe at iteration A
 with no stop, its cube scored every 25 (where the stop's windows close: 55, 80, …) and at the cap (every kept cube
 is held until the end, 240 of them at 6000 iterations). The *answer* is the last cube scored (5980 of 6000): its PSNR
 and mean spectral angle, and how far they moved over the last 1000 iterations (a check that it is one). The stop's
-estimate (:class:`clsdcam.solve.convergence.DistanceEstimate`, started afresh at AUTO_AT as the default's is) is
-replayed on the run, at most AUTO_CAP iterations:
+estimate (:class:`clsdcam.solve.convergence.DistanceEstimate`, started afresh at AUTO_AT as the default's is, and
+at RECOUNT_AT where its recount found lit spots) is replayed on the run, at most AUTO_CAP iterations:
 
 * at the tolerance ``--converge auto`` takes from the run's probe (:func:`clsdcam.solve.auto_weights.auto_tolerance`):
   where the default stops;
@@ -31,7 +31,7 @@ from bench_converged import curve, timed_solve, within
 from bench_panel import add_kinds_option, chosen_scenes, panel_scene, scene_done, scene_indices
 from bench_stop import replay, save_grid, scene_grid
 from clsdcam.algorithms.admm.algorithm import POINT_LIKE_BELOW
-from clsdcam.solve.auto_weights import AUTO_AT, auto_tolerance, probe_reading
+from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, SPOTS_FROM, auto_tolerance, probe_reading
 from clsdcam.solve.convergence import WINDOW
 from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE
 
@@ -45,11 +45,20 @@ def default_run(sim, iters: int) -> tuple[dict, list[dict]]:
     there (at the cap, the last closed window's)."""
     marks = sorted({*range(AUTO_AT + WINDOW, iters + 1, WINDOW), *([AUTO_CAP] if AUTO_CAP <= iters else [])})
     result, _ = timed_solve(sim, {"iters": iters, "algorithm": "admm"}, marks)
-    estimates = replay([r["change"] for r in result.history[AUTO_AT:]], WINDOW)
+    changes = [r["change"] for r in result.history]
+    starts = [AUTO_AT] + ([RECOUNT_AT] if lit_spots(result.attrs) else [])    # where the default's estimate starts
+    estimates = {start: replay(changes[start:], WINDOW) for start in starts}
     points = curve(sim, result)
     for point in points:
-        point["estimate"] = estimates[point["iteration"] - AUTO_AT - 1]
+        start = max(s for s in starts if s < point["iteration"])
+        point["estimate"] = estimates[start][point["iteration"] - start - 1]
     return result.attrs, points
+
+
+def lit_spots(attrs: dict) -> bool:
+    """Whether the run's recount (``lit_voxels_recounted``, at RECOUNT_AT on a scene read as a few points) found lit
+    spots: the default then takes the point-like penalties, starts its estimate afresh and stops at CONVERGE."""
+    return attrs.get("lit_voxels_recounted", 0.0) >= SPOTS_FROM
 
 
 def stop(points: list[dict], answer: dict, tolerance: float) -> dict:
@@ -67,7 +76,7 @@ def run_scene(plan: dict, args) -> dict:
     attrs, points = default_run(sim, args.iters)
     answer, before = points[-1], next(p for p in points if p["iteration"] >= points[-1]["iteration"] - SETTLED_OVER)
     point_like, few_points, lighter = probe_reading(attrs, POINT_LIKE_BELOW)
-    default = auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points, lighter)
+    default = CONVERGE if lit_spots(attrs) else auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points, lighter)
     return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
             "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
             "lighter": lighter, "noise": attrs["noise_estimate"],

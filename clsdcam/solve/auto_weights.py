@@ -43,14 +43,14 @@ scenes, halved, needed 0.01, and one in low light ended 0.25 dB short at 0.02 ("
 light").
 
 A scene counted as a few points is counted again at ``RECOUNT_AT``, the first iteration the stop can fire (the
-attribute ``lit_voxels_recounted``). By then ADMM has gathered each point into about its own voxel: the simulator's
+attribute ``lit_voxels_recounted``). By then ADMM has gathered each point into a few voxels: the simulator's
 sixteen sources count 17–35 and two points 4–21 (120×152 to 144×176), where the narrow-line spots of its lines
 scenes, which at AUTO_AT count as few as sixteen sources do, still count 88–367 (128×160). From ``SPOTS_FROM`` lit
 voxels the scene is one of lit spots: the algorithm takes its setting for a point-like scene instead
 (``Algorithm.lit_spots``; ADMM its point-like penalties, the TV balanced again), the estimate forgets its windows where
 that changed the iteration, and the stop goes back to the tolerance it narrowed. Counted in voxels, not per pixel:
-gathered, a point is one voxel whatever the sensor, where the spots grow with the field (docs/convergence.md, "A few
-points counted again").
+gathered, a point lights a few voxels whatever the sensor, where the spots grow with the field (docs/convergence.md,
+"A few points counted again").
 
 On small sensors, where a few points light enough of the frame for p to pass the threshold, the stop widens as
 before. Where the probe does not run (no auto weight, or an algorithm without a threshold) the tolerance stays.
@@ -101,8 +101,8 @@ GOOD_LIGHT_BELOW = 0.005
 RECOUNT_AT = AUTO_AT + FIRST_READING
 # lit voxels (sum/peak over the window) at RECOUNT_AT from which such a scene is one of lit spots, its stop back to
 # --converge: ADMM has gathered the simulator's sixteen sources into 17–35 and two points into 4–21 by then (120×152 to
-# 144×176), the narrow-line spots counted as a few points at AUTO_AT into 104–367 (128×160; docs/convergence.md, "A
-# few points counted again")
+# 144×176), the narrow-line spots counted as a few points at AUTO_AT into 104–367 (128×160), a fresh panel's into
+# 88–314 (docs/convergence.md, "A few points counted again")
 SPOTS_FROM = 64
 # lit voxels a window pixel under which a scene of a few points is of the fewest: the simulator's two-point scenes count
 # 0.003–0.009, its sixteen sources 0.0136–0.030 at every size measured (96×112 to 160×192)
@@ -154,7 +154,8 @@ def window_reading(problem, x) -> tuple[float, int, int]:
 
 
 class AutoWeights:
-    """The auto-weighted priors of one solve, chosen once at AUTO_AT."""
+    """The auto-weighted priors of one solve, chosen once at AUTO_AT, and a few points counted again at
+    RECOUNT_AT."""
 
     def __init__(self, priors: list, point_like_below: float = 0.0, wide_stop: float | None = None,
                  widely_lit_above: float = math.inf):

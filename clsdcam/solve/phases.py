@@ -97,7 +97,8 @@ class Phases:
             reason = self._iterate(first)
             if reason:
                 return reason
-            self.hooks[i].act(self.problem, self.driver)
+            with held_interrupt():          # a hook's change (weights, penalties) is made whole or not at all
+                self.hooks[i].act(self.problem, self.driver)
             iters -= first
 
     def _iterate(self, iters: int) -> str | None:
