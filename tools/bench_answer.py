@@ -31,7 +31,7 @@ from bench_converged import curve, timed_solve, within
 from bench_panel import add_kinds_option, chosen_scenes, panel_scene, scene_done, scene_indices
 from bench_stop import replay, save_grid, scene_grid
 from clsdcam.algorithms.admm.algorithm import POINT_LIKE_BELOW
-from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, SPOTS_FROM, auto_tolerance, probe_reading
+from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, auto_tolerance, probe_reading, recount_reading
 from clsdcam.solve.convergence import WINDOW
 from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE
 
@@ -46,19 +46,13 @@ def default_run(sim, iters: int) -> tuple[dict, list[dict]]:
     marks = sorted({*range(AUTO_AT + WINDOW, iters + 1, WINDOW), *([AUTO_CAP] if AUTO_CAP <= iters else [])})
     result, _ = timed_solve(sim, {"iters": iters, "algorithm": "admm"}, marks)
     changes = [r["change"] for r in result.history]
-    starts = [AUTO_AT] + ([RECOUNT_AT] if lit_spots(result.attrs) else [])    # where the default's estimate starts
+    starts = [AUTO_AT] + ([RECOUNT_AT] if recount_reading(result.attrs) else [])   # where its estimate starts
     estimates = {start: replay(changes[start:], WINDOW) for start in starts}
     points = curve(sim, result)
     for point in points:
         start = max(s for s in starts if s < point["iteration"])
         point["estimate"] = estimates[start][point["iteration"] - start - 1]
     return result.attrs, points
-
-
-def lit_spots(attrs: dict) -> bool:
-    """Whether the run's recount (``lit_voxels_recounted``, at RECOUNT_AT on a scene read as a few points) found lit
-    spots: the default then takes the point-like penalties, starts its estimate afresh and stops at CONVERGE."""
-    return attrs.get("lit_voxels_recounted", 0.0) >= SPOTS_FROM
 
 
 def stop(points: list[dict], answer: dict, tolerance: float) -> dict:
@@ -76,7 +70,8 @@ def run_scene(plan: dict, args) -> dict:
     attrs, points = default_run(sim, args.iters)
     answer, before = points[-1], next(p for p in points if p["iteration"] >= points[-1]["iteration"] - SETTLED_OVER)
     point_like, few_points, lighter = probe_reading(attrs, POINT_LIKE_BELOW)
-    default = CONVERGE if lit_spots(attrs) else auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points, lighter)
+    default = (CONVERGE if recount_reading(attrs)
+               else auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points, lighter))
     return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
             "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
             "lighter": lighter, "noise": attrs["noise_estimate"],

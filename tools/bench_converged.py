@@ -64,7 +64,7 @@ from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
-from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, SPOTS_FROM, probe_reading
+from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, probe_reading, recount_reading
 from clsdcam.solve.convergence import DistanceEstimate
 from clsdcam.solve.solver import Settings
 
@@ -118,9 +118,8 @@ def scene_weight(sim, weight_from: str) -> tuple[float, dict]:
     nothing)."""
     weight_run, _ = timed_solve(sim, TODAY if weight_from == "today" else {})
     point_like, few_points, lighter = probe_reading(weight_run.attrs, POINT_LIKE_BELOW)
-    spots = weight_run.attrs.get("lit_voxels_recounted", 0.0) >= SPOTS_FROM
     return float(weight_run.attrs["tv_chosen"]), {"point_like": point_like, "few_points": few_points,
-                                                  "lighter": lighter, "spots": spots}
+                                                  "lighter": lighter, "spots": recount_reading(weight_run.attrs)}
 
 
 @contextmanager

@@ -120,6 +120,12 @@ def probe_reading(attrs: dict, point_like_below: float) -> tuple[bool, bool, boo
     return point_like, few_points, few_points and lighter_few_points(attrs["noise_estimate"], attrs["lit_per_pixel"])
 
 
+def recount_reading(attrs: dict) -> bool:
+    """Whether the recount (``lit_voxels_recounted`` of a solve or its result, at RECOUNT_AT on a scene read as a few
+    points) found lit spots, SPOTS_FROM lit voxels or more. False where it did not count."""
+    return attrs.get("lit_voxels_recounted", 0.0) >= SPOTS_FROM
+
+
 def widely_lit(attrs: dict, widely_lit_above: float) -> bool:
     """Whether the probe's p (``mean_over_peak``) is at least the algorithm's ``widely_lit_above``: a scene whose light
     spreads over the frame, where the weight rises in low light (``AutoWeight.for_noise``). False where the probe did
@@ -231,7 +237,7 @@ class AutoWeights:
         self._recount_due = False
         p, voxels, _ = window_reading(problem, driver.x)
         n = self.chosen["lit_voxels_recounted"] = p * voxels
-        if n < SPOTS_FROM:
+        if not recount_reading(self.chosen):
             return
         driver.note(f"recount: lit spots, not a few points ({n:.0f} lit voxels at iteration {driver.iterations} ≥ "
                     f"{SPOTS_FROM})")
