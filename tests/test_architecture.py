@@ -4,7 +4,6 @@ import ast
 import inspect
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -246,12 +245,12 @@ def test_building_the_parser_imports_nothing_heavy():
     assert out.strip() == "[]"
 
 
-def test_help_is_quick():
-    """``clsdcam --help`` ≤ 0.3 s is the goal (0.12 s measured on the 2-core CI machine); the bound here is
-    generous, for loaded machines: the best of three runs under 1 s."""
-    seconds = []
-    for _ in range(3):
-        start = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "clsdcam", "--help"], capture_output=True, check=True)
-        seconds.append(time.perf_counter() - start)
-    assert min(seconds) < 1.0, seconds
+def test_help_imports_nothing_heavy():
+    """``clsdcam --help`` as users run it (the module, its entry point and the parser) imports none of HEAVY: what
+    made help slow was what it imported, which ``-X importtime`` lists whatever the machine's load (the time itself
+    is a benchmark's business, not a test's)."""
+    run = subprocess.run([sys.executable, "-X", "importtime", "-m", "clsdcam", "--help"], capture_output=True,
+                         text=True, check=True)
+    imported = {line.split("|")[-1].strip() for line in run.stderr.splitlines() if line.startswith("import time:")}
+    assert "clsdcam.cli.options" in imported and "usage" in run.stdout
+    assert not {m for m in imported for h in HEAVY if m == h or m.startswith(h + ".")}

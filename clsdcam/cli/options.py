@@ -184,7 +184,7 @@ def add_solver_options(p: argparse.ArgumentParser):
     """The solver's options: iterations, one weight per prior of the table, stopping rules, skips, backend."""
     from ..algorithms import ALGORITHMS
     from ..solve.priors import PRIORS
-    from ..solve.auto_weights import AUTO_AT
+    from ..solve.auto_weights import AUTO_AT, RECOUNT_AT
     from ..solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE, DEFAULT_ITERS
 
     p.add_argument("--iters", type=iteration_count, default=DEFAULT_ITERS, metavar="N|auto",
@@ -193,7 +193,9 @@ def add_solver_options(p: argparse.ArgumentParser):
     p.add_argument("--converge", type=weight(True), default="auto", metavar="D|auto",
                    help=f"with --iters auto: stop when the estimated relative distance to the converged cube is below "
                         f"D; auto (the default): {CONVERGE:g}, or {CONVERGE_WIDE:g} once iteration {AUTO_AT} shows a "
-                        f"scene that is not point-like, or less on a point-like scene of few lit voxels (docs/convergence.md)")
+                        f"scene that is not point-like, or less on a point-like scene of few lit voxels ({CONVERGE:g} "
+                        f"again where a recount at iteration {RECOUNT_AT} finds lit spots); {CONVERGE:g} where that "
+                        f"probe does not run (FISTA, a weight given; docs/convergence.md)")
     p.add_argument("--algorithm", default="auto", choices=("auto",) + tuple(ALGORITHMS),
                    help="the algorithm the solve runs: fista (FISTA with adaptive restart), admm (ADMM with "
                         "closed-form steps: fewer iterations, band space only, --tv and --l1 only), or auto (the "
