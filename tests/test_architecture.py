@@ -234,8 +234,8 @@ def test_the_contract_is_narrow():
     assert all(hasattr(be, name) for name in protocol_attributes(Platform))
 
 
-HEAVY = ("scipy", "h5py", "matplotlib", "pyopencl", "dask", "distributed", "clsdcam.solve.solver", "clsdcam.sim",
-         "clsdcam.analysis", "clsdcam.batch")
+HEAVY = ("scipy", "h5py", "matplotlib", "pyopencl", "dask", "distributed", "numba", "clsdcam.solve.solver",
+         "clsdcam.sim", "clsdcam.analysis", "clsdcam.batch")
 
 
 def test_building_the_parser_imports_nothing_heavy():

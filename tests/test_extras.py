@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 PROJECT = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))["project"]
 EXTRAS = PROJECT["optional-dependencies"]
 MACHINE_EXTRAS = {"vkfft", "intel"}       # what one machine's OpenCL offers: .ci/run adds them beside the test extra
-ELSEWHERE = {"pyvkfft"}                   # the vkfft extra's module: clsdcam.backends.fft runs without it
+ELSEWHERE = {"pyvkfft", "numba"}          # the vkfft and jit extras' modules: the package runs without them
 EXTRA_MODULES = sorted({module for _, modules in NEEDS.values() for module in modules})
 
 

@@ -413,11 +413,16 @@ TV_AXES = {"every axis": (1.0, 0.5, 2.0), "not λ": (1.0, 1.0, 0.0), "x only": (
 
 def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"], n_bands=5):
     """ADMM's steps on an ``n_bands``-band camera of 6×7 pixels (TV with ``tv_weights`` along x, y, λ as
-    ``--tv-weights``, or none; L1; a positive b), on NumPy and on ``backend``, with the same penalties."""
+    ``--tv-weights``, or none; L1; a positive b), NumPy's (the reference, not the compiled passes the host runs where
+    Numba is installed: tests/test_admm.py compares those with NumPy's) and on ``backend``, with the same
+    penalties."""
+    from unittest import mock
+
     from clsdcam.camera.model import ForwardModel
     from clsdcam.solve.priors import Sparsity, TotalVariation
     from clsdcam.solve.solver import Settings
-    from clsdcam.algorithms.admm import band_steps
+    from clsdcam.algorithms.admm import algorithm, band_steps
+    from clsdcam.algorithms.admm.host_steps import Splitting
     from clsdcam.algorithms.admm.terms import Penalties
     from clsdcam.solve.problem import Problem
 
@@ -429,7 +434,9 @@ def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"], n_bands=5):
         priors = [Sparsity(be, 0.4, None)]
         if tv_weights is not None:
             priors.append(TotalVariation(be, 0.05, Settings(tv_weights=tv_weights)))
-        split = band_steps(Problem(model, be.to_device(b), None, None, model.n_bands, priors=priors, filters=filters))
+        with mock.patch.object(algorithm, "host_steps", lambda: Splitting):
+            split = band_steps(Problem(model, be.to_device(b), None, None, model.n_bands, priors=priors,
+                                       filters=filters))
         split.set_penalties(Penalties(data=0.3, tv=0.7, nonneg=1.3, tv_balance=(0.6, 1.7, 1.2)))
         pair.append(split)
     return pair
@@ -478,6 +485,7 @@ def test_admm_splits_tv_adjoint_and_band_solve_match_numpy(dtype, axes, path):
     kernels skip the others), or none (zero-size split arrays); each axis with its own TV penalty."""
     backend = opencl(dtype, PATH_BACKEND[path])
     pair = admm_pair(dtype, backend, TV_AXES[axes])
+    assert type(pair[0]).__name__ == "Splitting"
     assert [len(split.axes) for split in pair] == [3 - TV_AXES[axes].count(0.0) if TV_AXES[axes] else 0] * 2
     ref, got = random_states(pair, backend)
     tolerance = 2e-6 if dtype == "float32" else 1e-12

@@ -250,6 +250,33 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
     assert "reference" not in progress                  # read from the cache: no solve to report
     assert [s["default"]["iterations"] for s in again["scenes"]] == [bench_converged.AUTO_AT + FIRST_READING] * 2
     assert (tmp_path / "b" / "converged.png").stat().st_size > 0
+    bench_converged.main(["--against", str(tmp_path / "a"), "--only", "1", "--replay", "1e9", "--cache",
+                          str(tmp_path / "none"), "--out", str(tmp_path / "c")])     # size, bands, seed: the run's
+    timed = json.loads((tmp_path / "c" / "converged.json").read_text())
+    assert (timed["seed"], timed["size"], timed["bands"], timed["against"]) == (3, "24x32", 4, str(tmp_path / "a"))
+    assert timed["host_steps"] == first["host_steps"] == "JitSplitting"
+    assert [(s["index"], s["kind"], s["references"]) for s in timed["scenes"]] == [
+        (1, "sparse", first["scenes"][1]["references"])]
+    assert timed["scenes"][0]["default"]["iterations"] == first["scenes"][1]["default"]["iterations"]
+    assert not list((tmp_path / "none").iterdir()) and "reference" not in capsys.readouterr().err
+
+
+SCENELESS = json.dumps({"seed": 3, "size": "24x32", "bands": 4, "reference_iters": 200, "kinds": None, "scenes": []})
+
+
+@pytest.mark.parametrize("stored, only, said", [(None, [], "--against"), ("{}", [], "--against"),
+                                                (SCENELESS, ["--only", "2"], "--only 2"),
+                                                (SCENELESS, [], "holds no scenes")])
+def test_bench_converged_refuses_an_earlier_run_it_cannot_use_before_writing(tmp_path, capsys, stored, only, said):
+    """--against a folder with no converged.json, with one that is not a run's or holds no scenes, or --only a scene
+    it does not hold: one line, exit 2, nothing written."""
+    if stored is not None:
+        (tmp_path / "run").mkdir()
+        (tmp_path / "run" / "converged.json").write_text(stored)
+    with pytest.raises(SystemExit) as exit_:
+        bench_converged.main(["--against", str(tmp_path / "run"), *only, "--out", str(tmp_path / "out")])
+    assert exit_.value.code == 2 and not (tmp_path / "out").exists()
+    assert said in capsys.readouterr().err.splitlines()[-1]
 
 
 @pytest.mark.parametrize("tolerance", ["0", "-0.1", "nan", "inf"])
@@ -733,7 +760,7 @@ def test_bench_breakdown_splits_every_configuration_and_sets_the_fft_floor_besid
                                  "--json", str(out)]) == 0
     result = json.loads(out.read_text())
     rows = result["configurations"]
-    assert set(rows) == {"default", "--subspace", "--rank 3", "--algorithm admm"}
+    assert set(rows) == {"default", "--subspace", "--rank 3", "--algorithm admm", "--algorithm admm, NumPy's passes"}
     for name, row in rows.items():
         parts = row["per_iteration"]
         assert set(parts) == set(bench_breakdown.PER_ITERATION) and row["iterations"] == 40

@@ -4,7 +4,8 @@
     python tools/bench_breakdown.py --size 320x448 --bands 64 --scene leds --iters 300 --ranks 8,16,23 --json b.json
     python tools/bench_breakdown.py --backend opencl ...     # a GPU: the queue finished at every boundary
 
-Each configuration (the default, ``--subspace``, each forced ``--rank``, ``--algorithm admm``) is one solve of the
+Each configuration (the default, ``--subspace``, each forced ``--rank``, ``--algorithm admm``, and on NumPy with the
+``jit`` extra installed ADMM again on NumPy's passes instead of the compiled ones) is one solve of the
 simulated scene, timed by wrapping the package's own functions (:data:`PARTS`): a part's time is its wall-clock time
 minus the time of the parts inside it (exclusive), except that an opaque part keeps everything inside it but the
 opaque parts (a basis check's transforms count as the check's, its power iteration as a power iteration). The
@@ -38,7 +39,7 @@ import json
 import sys
 import threading
 import time
-from contextlib import ExitStack, contextmanager
+from contextlib import ExitStack, contextmanager, nullcontext
 from pathlib import Path
 from unittest import mock
 
@@ -76,6 +77,7 @@ MOVES = "moves between spaces"
 POWER = "power iterations"
 WEIGHTS = "weight re-estimation"
 SETUP = "ADMM's set-up"
+NUMPY_PASSES = "numpy passes"    # a configuration's field: ADMM on NumPy's passes, the compiled ones installed
 PER_ITERATION = (TRANSFORMS, FILTERS, PRIOR, MOMENTUM, OBJECTIVE, BASIS, SPLITS, OTHER)
 ONE_OFF = (MOVES, POWER, WEIGHTS, SETUP)
 FFT_FUNCTIONS = ("fft", "ifft", "rfft", "irfft", "rfft2", "irfft2", "rfftn", "irfftn")
@@ -159,12 +161,15 @@ def clocked(clock: Clock):
         yield
 
 
-def configurations(ranks, admm: bool) -> dict:
-    """name -> Settings fields."""
+def configurations(ranks, admm: bool, host: bool) -> dict:
+    """name -> Settings fields; on the ``host`` (NumPy) with the compiled passes installed, ADMM's row again on
+    NumPy's passes (the field NUMPY_PASSES)."""
     configs = {"default": {}, "--subspace": {"subspace": True}}
     configs |= {f"--rank {rank}": {"rank": rank} for rank in ranks}
     if admm:
         configs["--algorithm admm"] = {"algorithm": "admm"}
+        if host and admm_algorithm.host_steps() is not Splitting:
+            configs["--algorithm admm, NumPy's passes"] = {"algorithm": "admm", NUMPY_PASSES: True}
     return configs
 
 
@@ -178,9 +183,12 @@ def synchronised(backend):
 
 def breakdown(sim, backend: str, fields: dict, iters: int) -> dict:
     """One solve's parts: seconds per iteration, one-off shares, the rank and field it ended in."""
+    fields = dict(fields)
+    numpy_passes = fields.pop(NUMPY_PASSES, False)
     solver = Solver(sim.calibration, backend=backend, settings=Settings(iters=iters, **fields))
     clock = Clock(synchronised(solver.backend))
-    with clocked(clock):
+    passes = mock.patch.object(admm_algorithm, "host_steps", lambda: Splitting) if numpy_passes else nullcontext()
+    with clocked(clock), passes:
         start = clock.now()
         result = solver.solve(sim.measurement)
         total = clock.now() - start
@@ -200,7 +208,7 @@ def measure(args) -> dict:
     ranks = [int(r) for r in args.ranks.split(",") if r]
     rows = {}
     admm = not args.no_admm
-    for name, fields in configurations(ranks, admm).items():
+    for name, fields in configurations(ranks, admm, args.backend == "numpy").items():
         row = breakdown(sim, args.backend, fields, args.iters)
         row["fft_floor"] = floor_timer(row["rank"], tuple(row["field"]))() if args.backend == "numpy" else None
         rows[name] = row

@@ -21,14 +21,18 @@ The rules (issue "Converged by default"), each scene's margins positive when it 
 * **no regression**: not (PSNR below today's by more than 0.2 dB *and* angle above today's by more than 0.5°).
 
 Also reported: FISTA's own seconds to come within 0.2 dB and 0.5° of the reference (from the reference run's
-snapshots) over the default's, the speed-up. Writes ``converged.json`` (after every scene), ``converged.md`` and
+snapshots) over the default's, the speed-up. Writes ``converged.json`` (after every scene; with the host's ADMM
+steps, ``host_steps``: compiled or NumPy's), ``converged.md`` and
 ``converged.png`` (every scene's PSNR and angle against seconds: both references' curves, today and the default as
 points, the reference's band). ``--seed`` replays a panel, ``--only I,J`` some scenes of it; ``--weight-from
 today`` takes the weight from today's run instead, ``--replay`` replays the stop at other tolerances on the
 cached reference runs, and ``--converge T`` runs the default with another stopping tolerance (the package's
 ``--converge`` T: what a new default tolerance would give, judged by the same rules). ``--kinds points`` (or any
 list of kinds) draws those kinds in turn: the simulator's scenes of a few points (``points``, ``sources``) are
-among them, which the panel's five kinds are not.
+among them, which the panel's five kinds are not. ``--against DIR`` times an earlier run's panel (its
+``converged.json``) again on this code, today's and the default's solves, judged against that run's references:
+for a change that leaves the model's answer where it was (a faster pass), whose default's weight then differs from
+the cached one's in the last digits.
 
 ``--variants 'alpha=1.7,tv=0.003;alpha=1'`` measures ADMM's constants instead (``clsdcam.algorithms.admm``'s DATA,
 TV, NONNEG, RELAXATION and BALANCE_AT, and THRESHOLD_OVER_RMS and THRESHOLD_FEW_POINTS of its balance, by the names
@@ -47,6 +51,7 @@ iteration N, ``rebalance=N`` balances the TV penalties again there (:mod:`admm_d
 from __future__ import annotations
 
 import hashlib
+import json
 import sys
 from contextlib import contextmanager
 from importlib import import_module
@@ -59,7 +64,7 @@ from admm_duals import DUAL_VARIANTS, dual_variants
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text, timed_run
 from bench_panel import (add_kinds_option, chosen_scenes, panel_scene, scene_indices, progress, scene_done,
                          scene_name)
-from clsdcam.algorithms.admm.algorithm import POINT_LIKE_BELOW
+from clsdcam.algorithms.admm.algorithm import POINT_LIKE_BELOW, host_steps
 from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
@@ -319,9 +324,9 @@ def margins(scene: dict) -> dict:
 
 
 def run_scene(plan: dict, shape, bands: int, iters: int, cache: Path, weight_from: str = "default",
-              converge: float | None = None) -> dict:
-    """Today, the default (with ``--converge converge`` where given) and the references of one scene, with the rules'
-    margins."""
+              converge: float | None = None, references: dict | None = None) -> dict:
+    """Today, the default (with ``--converge converge`` where given) and the references of one scene (run or cached;
+    or, given, an earlier run's ``references``: --against), with the rules' margins."""
     sim = panel_scene(plan, shape, bands)
     today_result, today_seconds = timed_solve(sim, TODAY)
     progress(f"{scene_name(plan)}: today's {today_result.iterations} iterations in {today_seconds:.0f} s")
@@ -329,7 +334,7 @@ def run_scene(plan: dict, shape, bands: int, iters: int, cache: Path, weight_fro
     progress(f"{scene_name(plan)}: the default's {default_result.iterations} iterations "
              f"({default_result.stop_reason}) in {default_seconds:.0f} s")
     tau = float((default_result if weight_from == "default" else today_result).attrs["tv_chosen"])
-    runs = {a: reference_run(sim, plan, tau, a, iters, cache) for a in REFERENCE_ALGORITHMS}
+    runs = references or {a: reference_run(sim, plan, tau, a, iters, cache) for a in REFERENCE_ALGORITHMS}
     scene = {**plan, "tv": tau, "today": final_point(sim, today_result, today_seconds),
              "default": final_point(sim, default_result, default_seconds), "references": runs,
              "reference": reference(runs)}
@@ -448,6 +453,28 @@ def add_panel_options(parser, scenes: int, reference_iters: int, weight_from: st
                         help=f"whose --tv auto choice is the scene's weight (default: {WEIGHT_FROM[weight_from]})")
 
 
+def stored_panel(parser, args) -> tuple[int, list[tuple[int, dict, dict]]]:
+    """--against DIR: the seed of the run in DIR/converged.json and its scenes that --only keeps, each as (index,
+    plan, references); its size, bands, kinds and reference iterations replace the options'. A file that cannot be
+    read, or an index of --only that it does not hold, is the parser's one-line error."""
+    path = Path(args.against) / "converged.json"
+    try:
+        stored = json.loads(path.read_text(encoding="utf-8"))
+        args.size, args.bands = tuple(int(n) for n in stored["size"].split("x")), stored["bands"]
+        args.reference_iters, args.kinds = stored["reference_iters"], stored["kinds"]
+        scenes = [(s["index"], {k: s[k] for k in ("kind", "level", "seed")}, s["references"])
+                  for s in stored["scenes"]]
+        seed = stored["seed"]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
+        parser.error(f"--against {args.against}: not a run's converged.json ({error!r})")
+    missing = sorted(set(args.only or ()) - {index for index, _, _ in scenes})
+    if missing:
+        parser.error(f"--only {','.join(map(str, missing))}: not among {path}'s scenes")
+    if not scenes:
+        parser.error(f"--against {args.against}: {path} holds no scenes")
+    return seed, [scene for scene in scenes if not args.only or scene[0] in args.only]
+
+
 def main(argv=None) -> int:
     parser = panel_parser(__doc__.splitlines()[0], "converged", named_scenes=False)
     parser.set_defaults(size=(128, 160))
@@ -460,6 +487,9 @@ def main(argv=None) -> int:
     parser.add_argument("--variant-iters", type=int, default=500, help="each variant's iterations (default 500)")
     parser.add_argument("--converge", type=float, default=None, metavar="T",
                         help="the default's stopping tolerance (default: the package's, --converge's default)")
+    parser.add_argument("--against", metavar="DIR",
+                        help="time the panel of an earlier run (DIR/converged.json) again on this code, judged against "
+                             "that run's references (a change that leaves the model's answer where it was)")
     add_backend_option(parser)
     args = parser.parse_args(argv)
     try:
@@ -474,21 +504,29 @@ def main(argv=None) -> int:
     if args.backend != "numpy" and any(set(v) & {*ACCELERATIONS, *DUAL_VARIANTS} for v in args.variants):
         parser.error("--variants momentum/anderson/spectral/duals/refresh/rebalance wrap the host steps: "
                      "--backend numpy")
+    if args.against and args.variants:
+        parser.error("--against re-times the default and today: no --variants")
     Where.use(args.backend)
-    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
-    chosen = chosen_scenes(parser, args, seed)
+    if args.against:
+        seed, chosen = stored_panel(parser, args)
+    else:
+        seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2 ** 63)
+        chosen = [(i, plan, None) for i, plan in chosen_scenes(parser, args, seed)]
     out, cache = Path(args.out), Path(args.cache)
     out.mkdir(parents=True, exist_ok=True)
     cache.mkdir(parents=True, exist_ok=True)
     results = {"seed": seed, "kinds": args.kinds, "size": size_text(args.size), "bands": args.bands,
                "backend": args.backend, "reference_iters": args.reference_iters, "weight_from": args.weight_from,
-               "converge": args.converge, "replay": [float(t) for t in args.replay.split(",") if t], "scenes": []}
+               "converge": args.converge, "replay": [float(t) for t in args.replay.split(",") if t],
+               "against": args.against, "scenes": [],
+               "host_steps": host_steps().__name__ if args.backend == "numpy" else None}
     args.tolerances = results["replay"]
     name = "variants" if args.variants else "converged"
     print(f"panel seed {seed}", file=sys.stderr, flush=True)
-    for i, plan in chosen:
+    for i, plan, references in chosen:
         scene = (variant_runs(plan, args.size, args.bands, args, cache) if args.variants else
-                 run_scene(plan, args.size, args.bands, args.reference_iters, cache, args.weight_from, args.converge))
+                 run_scene(plan, args.size, args.bands, args.reference_iters, cache, args.weight_from, args.converge,
+                           references))
         results["scenes"].append({"index": i, **scene})
         scene_done(i, plan, args.scenes)
         save_json(out, name, results)

@@ -21,8 +21,9 @@ probe's recount finds to be one of lit spots takes a point-like scene's penaltie
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
 (:meth:`Admm.carry`, :meth:`Admm.resume`); a warm start from a cube (``x0``) starts its duals afresh. It runs in
-band space (``move`` refuses a change of space), on NumPy (:class:`~.host_steps.Splitting`) and on backends with
-programs (:class:`~.kernel_steps.KernelSplitting`): :func:`band_steps` picks them.
+band space (``move`` refuses a change of space), on NumPy (:class:`~.host_steps.Splitting`, its passes compiled by
+:class:`~.jit_steps.JitSplitting` where Numba is installed) and on backends with programs
+(:class:`~.kernel_steps.KernelSplitting`): :func:`band_steps` picks them.
 """
 from __future__ import annotations
 
@@ -81,10 +82,22 @@ def penalties_for(split: "SplittingBase") -> "Penalties":
     return Penalties(data=data, tv=TV * data * split.transfer_peak, nonneg=NONNEG * data * split.transfer_peak)
 
 
+def host_steps() -> type:
+    """The host's steps: :class:`~.jit_steps.JitSplitting`, the passes compiled, where Numba imports (the ``jit``
+    extra), else NumPy's :class:`~.host_steps.Splitting` (Numba absent, or refusing this NumPy)."""
+    try:
+        from .jit_steps import JitSplitting
+    except ImportError:
+        from .host_steps import Splitting
+
+        return Splitting
+    return JitSplitting
+
+
 def band_steps(problem) -> "SplittingBase":
     """ADMM's steps for a band-space ``problem`` under its TV and L1 priors (what the settings let ADMM take): the
-    kernels on a backend with programs (:class:`~clsdcam.backends.base.Programs`), else the host's NumPy steps; the
-    calibration's terms from the solver's shared store. InputError in a subspace."""
+    kernels on a backend with programs (:class:`~clsdcam.backends.base.Programs`), else the host's steps
+    (:func:`host_steps`); the calibration's terms from the solver's shared store. InputError in a subspace."""
     if problem.subspace is not None:
         raise InputError("--algorithm admm runs in band space: no --subspace or --rank")
     from .terms import calibration_terms
@@ -96,9 +109,7 @@ def band_steps(problem) -> "SplittingBase":
         from .kernel_steps import KernelSplitting
 
         return KernelSplitting(model, problem.b, terms, tv, l1, RELAXATION)
-    from .host_steps import Splitting
-
-    return Splitting(model, backend.to_host(problem.b), terms, tv, l1, backend.workers, RELAXATION)
+    return host_steps()(model, backend.to_host(problem.b), terms, tv, l1, backend.workers, RELAXATION)
 
 
 class Admm(Algorithm):

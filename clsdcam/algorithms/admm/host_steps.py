@@ -226,17 +226,18 @@ class Splitting(SplittingBase):
     def _add_tv_adjoint(self, state: SplitState) -> None:
         """rest += Σ_d μ₂,d·D_dᵀs_d on row blocks."""
         k, hp, wp = self.shape
-
-        def block(y0, y1, scratch):
-            out = state.rest[:, y0:y1]
-            for i, axis in enumerate(self.axes):
-                s = state.s[i]
-                above = s[:, (y0 - 1) % hp] if axis == 1 else None
-                difference_adjoint_add(s[:, y0:y1], axis, self.penalties.tv_along(axis), out, above=above,
-                                       scratch=scratch)
-
         if self.axes:
-            map_blocks(block, hp, k * wp * self.dtype.itemsize, self.workers)
+            map_blocks(lambda y0, y1, scratch: self._adjoint_block(state, y0, y1, scratch), hp,
+                       k * wp * self.dtype.itemsize, self.workers)
+
+    def _adjoint_block(self, state: SplitState, y0: int, y1: int, scratch: dict) -> None:
+        """rest += Σ_d μ₂,d·D_dᵀs_d on rows y0…y1 (along y with the row above the block)."""
+        out = state.rest[:, y0:y1]
+        for i, axis in enumerate(self.axes):
+            s = state.s[i]
+            above = s[:, (y0 - 1) % self.shape[1]] if axis == 1 else None
+            difference_adjoint_add(s[:, y0:y1], axis, self.penalties.tv_along(axis), out, above=above,
+                                   scratch=scratch)
 
     def rescale_tv_duals(self, state: SplitState, ratios: dict) -> None:
         """s_d ← s_d + (1 − r_d)η_d, η_d ← r_d·η_d for each active axis d, r_d = ``ratios[d]`` (:mod:`.balance`)."""
