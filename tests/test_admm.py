@@ -31,6 +31,19 @@ RNG = np.random.default_rng(7)
 STEPS = {"numpy": Splitting, "compiled": JitSplitting}
 
 
+def camera_steps(kind, rng, dtype="float64", n_bands=3, shape=(4, 5), tv_weights=(1.0, 0.5, 2.0)):
+    """(model, ``kind``'s steps) on an ``n_bands``-band camera of ``shape`` pixels on its doubled field: PSF, filters
+    and a positive b drawn from ``rng`` in that order, TV with ``tv_weights`` (None: no TV) and L1, on two threads,
+    with fixed penalties, each TV axis its own."""
+    psf, filters = rng.random(shape), rng.random((n_bands,) + shape)
+    model = ForwardModel(NumpyBackend(dtype), psf, filters)
+    tv = None if tv_weights is None else TotalVariation(model.backend, 0.05, Settings(tv_weights=tv_weights))
+    split = kind(model, rng.random(shape), CalibrationTerms(model, filters), tv=tv,
+                 l1=Sparsity(model.backend, 0.4, None), workers=2)
+    split.set_penalties(Penalties(data=0.3, tv=0.7, nonneg=1.3, tv_balance=(0.6, 1.7, 1.2)))
+    return model, split
+
+
 @pytest.fixture(params=[(blocks_, steps) for blocks_ in ("whole", "row blocks") for steps in STEPS],
                 ids=lambda param: "-".join(param))
 def tiny(request, monkeypatch):
@@ -39,14 +52,7 @@ def tiny(request, monkeypatch):
     layout, steps = request.param
     if layout == "row blocks":
         monkeypatch.setattr(blocks, "BLOCK_BYTES", 1)
-    psf = RNG.random((4, 5))
-    filters = RNG.random((3, 4, 5))
-    model = ForwardModel(NumpyBackend("float64"), psf, filters)
-    tv = TotalVariation(model.backend, 0.05, Settings(tv_weights=(1.0, 0.5, 2.0)))
-    split = STEPS[steps](model, RNG.random((4, 5)), CalibrationTerms(model, filters), tv=tv,
-                         l1=Sparsity(model.backend, 0.4, None), workers=2)
-    split.set_penalties(Penalties(data=0.3, tv=0.7, nonneg=1.3, tv_balance=(0.6, 1.7, 1.2)))
-    return model, split
+    return camera_steps(STEPS[steps], RNG)
 
 
 def dense(operator, shape) -> np.ndarray:
@@ -237,15 +243,8 @@ def test_the_compiled_passes_match_numpys_from_one_random_state(monkeypatch, dty
     but the x-step's (whose sums over the bands run in float64 where NumPy's einsum rounds to the cube's precision:
     within float32's elementwise rule, 2·10⁻⁶ of the array's largest), and return the same sums to that rule."""
     monkeypatch.setattr(blocks, "BLOCK_BYTES", 1)
-    rng = np.random.default_rng(9)
-    filters, psf, b = rng.random((5, 6, 7)), rng.random((6, 7)), rng.random((6, 7))
-    model = ForwardModel(NumpyBackend(dtype), psf, filters)
-    tv = None if tv_weights is None else TotalVariation(model.backend, 0.05, Settings(tv_weights=tv_weights))
-    terms = CalibrationTerms(model, filters)
-    steps = [kind(model, b, terms, tv=tv, l1=Sparsity(model.backend, 0.4, None), workers=2)
+    steps = [camera_steps(kind, np.random.default_rng(9), dtype, 5, (6, 7), tv_weights)[1]
              for kind in (Splitting, JitSplitting)]
-    for split in steps:
-        split.set_penalties(Penalties(data=0.3, tv=0.7, nonneg=1.3, tv_balance=(0.6, 1.7, 1.2)))
     numpy_state = random_state(steps[0])
     states = [numpy_state, dataclasses.replace(numpy_state, **{name: getattr(numpy_state, name).copy()
                                                                for name in STATE_ARRAYS})]
