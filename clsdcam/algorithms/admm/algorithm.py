@@ -28,6 +28,7 @@ band space (``move`` refuses a change of space), on NumPy (:class:`~.host_steps.
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import cache
 from typing import TYPE_CHECKING
 
 from ...backends.base import Programs
@@ -82,9 +83,11 @@ def penalties_for(split: "SplittingBase") -> "Penalties":
     return Penalties(data=data, tv=TV * data * split.transfer_peak, nonneg=NONNEG * data * split.transfer_peak)
 
 
+@cache
 def host_steps() -> type:
     """The host's steps: :class:`~.jit_steps.JitSplitting`, the passes compiled, where Numba imports (the ``jit``
-    extra), else NumPy's :class:`~.host_steps.Splitting` (Numba absent, or refusing this NumPy)."""
+    extra), else NumPy's :class:`~.host_steps.Splitting` (Numba absent, or refusing this NumPy); chosen once a
+    process, so a video's frames do not try a refused import again."""
     try:
         from .jit_steps import JitSplitting
     except ImportError:
