@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft
 
-from ...backends import map_blocks, scratch_buffer
+from ...backends import irfft2, map_blocks, scratch_buffer
 from .terms import CalibrationTerms, SplitState, SplittingBase
 
 FFT_CHUNK_BYTES = 4 << 20     # spectrum bytes per chunk of bands in the transforms (host_convolution's)
@@ -266,11 +266,12 @@ class Splitting(SplittingBase):
             out[k0:k0 + self.chunk] = scipy.fft.rfft2(x[k0:k0 + self.chunk], workers=self.workers)
 
     def _irfft2(self, spectrum: np.ndarray, out: np.ndarray) -> None:
+        """out ← irfft2(spectrum), the spectrum overwritten (the c-step's, spent once transformed back)."""
         for k0 in range(0, self.n_bands, self.chunk):
-            out[k0:k0 + self.chunk] = scipy.fft.irfft2(spectrum[k0:k0 + self.chunk], s=self.field_shape,
-                                                       workers=self.workers)
+            out[k0:k0 + self.chunk] = irfft2(spectrum[k0:k0 + self.chunk], self.field_shape, self.workers,
+                                             overwrite=True)
 
     def convolve(self, v: np.ndarray) -> np.ndarray:
         """Hv = irfft2(Ĥ·rfft2(v)) (the start's; 2K transforms)."""
-        return scipy.fft.irfft2(scipy.fft.rfft2(v, workers=self.workers) * self.transfer, s=self.field_shape,
-                                workers=self.workers)
+        return irfft2(scipy.fft.rfft2(v, workers=self.workers) * self.transfer, self.field_shape, self.workers,
+                      overwrite=True)
