@@ -24,7 +24,6 @@ import argparse
 import json
 import sys
 import time
-
 from unittest import mock
 
 import numpy as np
@@ -104,6 +103,29 @@ def in_solve(size, bands: int, rounds: int) -> dict:
             for part in parts}
 
 
+def alone(field, bands: int, workers: int, rounds: int) -> dict:
+    """Each way of :func:`ways` on one random field's half spectrum, alternating: medians (and the in-place ways'
+    copy), ratios to ``irfft2``'s, and each way's largest difference from it."""
+    spectrum = scipy.fft.rfft2(np.random.default_rng(0).random((bands,) + field, dtype=np.float32))
+    scratch = np.empty_like(spectrum)
+    runs = ways(spectrum, scratch, field, workers)
+    seconds = {name: [] for name in [*runs, "copy"]}
+    results = {}
+    for _ in range(rounds):
+        for name, run in runs.items():
+            if name.endswith("in place"):
+                start = time.perf_counter()
+                np.copyto(scratch, spectrum)
+                seconds["copy"].append(time.perf_counter() - start)
+            start = time.perf_counter()
+            cube = run()
+            seconds[name].append(time.perf_counter() - start)
+            results[name] = cube.copy()
+    medians = {name: float(np.median(s)) for name, s in seconds.items()}
+    return {"median_seconds": medians, "ratio": {name: medians[name] / medians["irfft2"] for name in runs},
+            "largest_difference": {name: float(np.abs(r - results["irfft2"]).max()) for name, r in results.items()}}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", default="256x320", help="the field Hp×Wp (default: a 128×160 sensor's)")
@@ -124,31 +146,12 @@ def main(argv=None) -> int:
                   f"({new / old:.2f}×)")
         return save(report, args.json)
     field = tuple(int(n) for n in args.size.split("x"))
-    cube = np.random.default_rng(0).random((args.bands,) + field, dtype=np.float32)
-    spectrum = scipy.fft.rfft2(cube)
-    scratch = np.empty_like(spectrum)
-    runs = ways(spectrum, scratch, field, args.workers)
-    seconds = {name: [] for name in [*runs, "copy"]}
-    results = {}
-    for _ in range(args.repeat):
-        for name, run in runs.items():
-            if name.endswith("in place"):
-                start = time.perf_counter()
-                np.copyto(scratch, spectrum)
-                seconds["copy"].append(time.perf_counter() - start)
-            start = time.perf_counter()
-            cube = run()
-            seconds[name].append(time.perf_counter() - start)
-            results[name] = cube.copy()
-    medians = {name: float(np.median(s)) for name, s in seconds.items()}
-    base = results["irfft2"]
-    report = {"size": args.size, "bands": args.bands, "workers": args.workers, "median_seconds": medians,
-              "ratio": {name: medians[name] / medians["irfft2"] for name in runs},
-              "largest_difference": {name: float(np.abs(r - base).max()) for name, r in results.items()}}
-    for name in runs:
-        print(f"{name:22s} {1e3 * medians[name]:7.1f} ms  {report['ratio'][name]:.2f}×  "
+    report = {"size": args.size, "bands": args.bands, "workers": args.workers,
+              **alone(field, args.bands, args.workers, args.repeat)}
+    for name, ratio in report["ratio"].items():
+        print(f"{name:22s} {1e3 * report['median_seconds'][name]:7.1f} ms  {ratio:.2f}×  "
               f"largest difference {report['largest_difference'][name]:.1e}")
-    print(f"{'(the copy, taken off)':22s} {1e3 * medians['copy']:7.1f} ms")
+    print(f"{'(the copy, taken off)':22s} {1e3 * report['median_seconds']['copy']:7.1f} ms")
     return save(report, args.json)
 
 
