@@ -12,6 +12,7 @@ import admm_acceleration  # noqa: E402
 import admm_duals  # noqa: E402
 import bench_accuracy  # noqa: E402
 import bench_admm  # noqa: E402
+import bench_admm_passes  # noqa: E402
 import bench_answer  # noqa: E402
 import bench_breakdown  # noqa: E402
 import bench_converged  # noqa: E402
@@ -788,6 +789,29 @@ def test_bench_breakdown_on_opencl_finishes_the_queue_and_leaves_the_host_floor_
     admm = rows["--algorithm admm"]                               # its kernels' passes and its set-up are charged
     assert admm["per_iteration"][bench_breakdown.SPLITS] > 0 and admm["one_off_share"][bench_breakdown.SETUP] > 0
     assert "opencl: " in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("steps", ["compiled", "numpy"])
+def test_bench_admm_passes_times_every_pass_and_the_rest_adds_up(tmp_path, capsys, monkeypatch, steps):
+    """Every pass of the host steps gets time, the compiled ones each or NumPy's splits as one, and the parts with
+    the rest make the solve."""
+    from clsdcam.algorithms.admm import algorithm
+    from clsdcam.algorithms.admm.host_steps import Splitting
+
+    monkeypatch.setenv("CLSDCAM_THREADS", "1")      # main sets it for the clocks; restored after the test
+    if steps == "numpy":
+        monkeypatch.setattr(algorithm, "host_steps", lambda: Splitting)
+    out = tmp_path / "passes.json"
+    assert bench_admm_passes.main(["--size", "24x32", "--bands", "8", "--iters", "12", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    parts = result["ms_per_iteration"]
+    timed = set(bench_admm_passes.HOST_PASSES) | (set(bench_admm_passes.COMPILED_PASSES) if steps == "compiled"
+                                                   else {bench_admm_passes.NUMPY_SPLITS})
+    assert set(parts) == timed | {"the rest"} and result["iterations"] == 12
+    assert all(parts[part] > 0 for part in timed)
+    assert sum(parts.values()) == pytest.approx(result["total_ms_per_iteration"])
+    assert result["steps"] == ("JitSplitting" if steps == "compiled" else "Splitting")
+    assert "| **the solve** |" in capsys.readouterr().out
 
 
 def test_compare_speed_pairs_two_checkouts_and_refuses_a_folder_without_one(tmp_path, capsys):

@@ -35,7 +35,6 @@ Timings drift ±30 % on a shared machine: read the ratios within one run.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import threading
 import time
@@ -48,6 +47,7 @@ import scipy.fft
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_iteration import floor_timer  # noqa: E402
+from report import emit  # noqa: E402
 
 from clsdcam.algorithms.admm import Admm  # noqa: E402
 from clsdcam.algorithms.fista import Fista  # noqa: E402
@@ -259,10 +259,7 @@ def main(argv=None) -> int:
     parser.add_argument("--json")
     args = parser.parse_args(argv)
     result = measure(args)
-    if args.json:                                   # written first: a long run's figures survive a broken pipe
-        Path(args.json).write_text(json.dumps(result, indent=1))
-    print(table(result))
-    return 0
+    return emit(result, table(result), args.json)
 
 
 if __name__ == "__main__":

@@ -17,7 +17,6 @@ checks every 25 iterations); set-up is not in it.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -28,6 +27,7 @@ import scipy.fft
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from authors_baseline import AuthorsSolver  # noqa: E402
+from report import emit  # noqa: E402
 
 from clsdcam.backends.host_convolution import CHUNK_BYTES  # noqa: E402
 from clsdcam.solve.space_policy import WARMUP  # noqa: E402
@@ -171,10 +171,7 @@ def main(argv=None) -> int:
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
     result = measure(args)
-    print(table(result))
-    if args.json:
-        Path(args.json).write_text(json.dumps(result, indent=1))
-    return 0
+    return emit(result, table(result), args.json)
 
 
 if __name__ == "__main__":
