@@ -1,19 +1,20 @@
 """ADMM's host passes compiled by Numba (the ``jit`` extra): :class:`JitSplitting`, the NumPy steps
 (:class:`~.host_steps.Splitting`) with their splits and TV adjoint written as loops over a block of rows, in the
 arithmetic of ``kernels/admm.cl``; each loop walks the block band by band, every plane's rows in order (the x-step,
-which first walked it pixel by pixel across the bands, took 1.4–2× its time so: docs/benchmarks.md, "The x-step band
-by band").
+which first walked it row by row across the bands, took 1.4–2× the time it takes now in a solve: docs/benchmarks.md,
+"The x-step band by band").
 
 NumPy makes one pass over the field per operation: its splits and TV adjoint read and write the cube several dozen
-times an iteration, and took twice the time of its 4K transforms; here the x-step, the w-step, the u-step along
-each axis and the TV adjoint pass once each (docs/convergence.md, "ADMM's passes compiled on the host"). NumPy cannot
-fuse them, and numexpr, which fuses expressions, ran the u-step's arithmetic 4× slower than NumPy's passes
-(docs/admm.md, "Seconds per iteration"); hence these loops, written by hand. They are the kernels' arithmetic in the
-kernels' order (sums in float64, as the kernels' ``ACC``), and NumPy's but for its sums' rounding. The blocks and
-threads are host_steps' own: the loops release the GIL, so :func:`~clsdcam.backends.map_blocks` runs them on its
-threads, and Numba starts no thread pool of its own (safe under Dask's threads). Compiled on first use and cached
-(beside the module, or in Numba's own cache folder where that is not writable). The solve along λ stays NumPy's
-(compiled, it took the same time), and so do the one-off passes (the duals rescaled for new penalties)."""
+times an iteration, and took twice the time of its 4K transforms; here the w-step, the u-step along each axis and the
+TV adjoint pass once each, the x-step twice over the window (its sums, then its step) and once elsewhere
+(docs/convergence.md, "ADMM's passes compiled on the host"). NumPy cannot fuse them, and numexpr, which fuses
+expressions, ran the u-step's arithmetic 4× slower than NumPy's passes (docs/admm.md, "Seconds per iteration"); hence
+these loops, written by hand. They are the kernels' arithmetic in the kernels' order (sums in float64, as the kernels'
+``ACC``), and NumPy's but for its sums' rounding. The blocks and threads are host_steps' own: the loops release the
+GIL, so :func:`~clsdcam.backends.map_blocks` runs them on its threads, and Numba starts no thread pool of its own
+(safe under Dask's threads). Compiled on first use and cached (beside the module, or in Numba's own cache folder where
+that is not writable). The solve along λ stays NumPy's (compiled, it took the same time), and so do the one-off passes
+(the duals rescaled for new penalties)."""
 from __future__ import annotations
 
 import numpy as np
@@ -56,8 +57,8 @@ def x_pass(hv, x, xi, f, gain, b, alpha, one_minus, y0, y1):
     """The x-step on field rows y0…y1 (``kernels/admm.cl``'s admm_x_step): q = α·hv + (1 − α)·x (+ ξ on the window);
     on the window ξ ← −g·(b − fᵀq), x ← q − ξ, hv ← x − ξ; outside it x ← q, hv ← q. Returns ½Σ(fᵀhv − b)² over
     the block's window rows, at hv before the step. Band by band, each row's window and the rest of it in separate
-    loops: per element the kernel's arithmetic, the planes read in order (pixel by pixel across the bands, the pass
-    took about 2× the time at 128×160 and 1.4–1.6× at 320×448)."""
+    loops: per element the kernel's arithmetic, the planes read in order (row by row across the bands, the pass took
+    about 2× the time in a solve at 128×160 and 1.4–1.6× at 320×448)."""
     n_bands, _, wp = hv.shape
     h, w = b.shape
     data, misfit = window_misfit(hv, x, xi, f, b, alpha, one_minus, y0, y1)
