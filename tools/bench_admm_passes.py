@@ -25,6 +25,7 @@ from unittest import mock
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_breakdown import Clock  # noqa: E402
 from report import emit  # noqa: E402
 
 # part -> the attribute timed: the c-step's parts on host_steps.Splitting (the compiled steps inherit them), the
@@ -52,26 +53,16 @@ def timed_solve(sim, iters: int, parts: dict) -> dict:
     """One ADMM solve of ``iters`` iterations with every part wrapped: milliseconds per iteration, part by part."""
     from clsdcam.solve.solver import Settings, Solver
 
-    spent = dict.fromkeys(parts, 0.0)
-
-    def wrap(part, function):
-        def timed(*args, **kwargs):
-            start = time.perf_counter()
-            try:
-                return function(*args, **kwargs)
-            finally:
-                spent[part] += time.perf_counter() - start
-        return timed
-
+    clock = Clock()
     solver = Solver(sim.calibration, backend="numpy", settings=Settings(iters=iters, algorithm="admm"))
     with ExitStack() as stack:
         for part, (owner, name) in parts.items():
-            stack.enter_context(mock.patch.object(owner, name, wrap(part, getattr(owner, name))))
+            stack.enter_context(mock.patch.object(owner, name, clock.wrap(getattr(owner, name), part, False)))
         start = time.perf_counter()
         result = solver.solve(sim.measurement)
         total = time.perf_counter() - start
     done = len(result.history)
-    per_iteration = {part: 1e3 * seconds / done for part, seconds in spent.items()}
+    per_iteration = {part: 1e3 * clock.seconds.get(part, 0.0) / done for part in parts}
     per_iteration["the rest"] = 1e3 * total / done - sum(per_iteration.values())
     return {"iterations": done, "ms_per_iteration": per_iteration, "total_ms_per_iteration": 1e3 * total / done}
 
