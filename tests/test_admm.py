@@ -8,6 +8,7 @@ import types
 
 import numpy as np
 import pytest
+import scipy.fft
 import scipy.linalg
 
 from clsdcam.algorithms import admm
@@ -74,10 +75,20 @@ STATE_ARRAYS = ("v", "hv", "x", "xi", "rho", "w", "eta", "s", "rest")
 
 
 def random_state(split) -> SplitState:
+    """A state of ``split``'s shapes, every array random (normal); Ŷ the spectrum of a random field."""
     state, _ = split.start(RNG.random(split.shape))
     for name in STATE_ARRAYS:
         getattr(state, name)[...] = RNG.standard_normal(getattr(state, name).shape)
+    state.data_spectrum[...] = scipy.fft.rfft2(RNG.standard_normal(split.shape))
     return state
+
+
+def data_input(split, state) -> np.ndarray:
+    """x − ξ over the field, as the host keeps it after the splits: irfft2(Ŷ) and the window's change in ``hv``."""
+    h, w = split.sensor_shape
+    field = scipy.fft.irfft2(state.data_spectrum, s=split.field_shape)
+    field[:, :h, :w] += state.hv
+    return field
 
 
 def grid_argmin(cost, q, grid=np.linspace(-12, 12, 240001)) -> float:
@@ -119,22 +130,27 @@ def test_the_x_differences_along_row_runs_match_the_columnwise_ones_bit_for_bit(
 
 
 def test_the_c_step_solves_its_normal_equations(tiny):
-    """(μ₁HᵀH + Σ_d μ₂,dD_dᵀD_d + μ₃I)v = μ₁Hᵀ(x − ξ) + Σ_d μ₂,dD_dᵀs_d + μ₃(w − ρ) (x − ξ in ``hv``, μ₃(w − ρ) in
-    ``rest``; each axis with its own TV penalty), against a dense solve; and Hv."""
+    """(μ₁HᵀH + Σ_d μ₂,dD_dᵀD_d + μ₃I)v = μ₁Hᵀ(x − ξ) + Σ_d μ₂,dD_dᵀs_d + μ₃(w − ρ) (x − ξ from Ŷ and the window's
+    change in ``hv``, μ₃(w − ρ) in ``rest``; each axis with its own TV penalty), against a dense solve; then Ŷ the
+    relaxed y = αHv + (1 − α)(x − ξ), and ``hv`` its window."""
     _, split = tiny
-    p, shape = split.penalties, split.shape
+    p, shape, (h, w) = split.penalties, split.shape, split.sensor_shape
     state = random_state(split)
     H = dense(split.convolve, shape)
     D = [dense(lambda e, a=axis: difference(e, a, np.empty_like(e)), shape) for axis in split.axes]
     mu = [p.tv_along(axis) for axis in split.axes]
     system = p.data * H.T @ H + sum(m * d.T @ d for m, d in zip(mu, D)) + p.nonneg * np.eye(H.shape[0])
-    rhs = p.data * H.T @ np.ravel(state.hv) + sum(m * d.T @ np.ravel(s) for m, d, s in zip(mu, D, state.s)) \
+    before = data_input(split, state)
+    rhs = p.data * H.T @ np.ravel(before) + sum(m * d.T @ np.ravel(s) for m, d, s in zip(mu, D, state.s)) \
         + np.ravel(state.rest)
     expected = np.linalg.solve(system, rhs)
     split.c_step(state)
     tolerance = 1e-9 * np.abs(expected).max()
+    hv = (H @ expected).reshape(shape)
+    relaxed = split.relaxation * hv + (1 - split.relaxation) * before
     np.testing.assert_allclose(np.ravel(state.v), expected, atol=tolerance)
-    np.testing.assert_allclose(np.ravel(state.hv), H @ expected, atol=tolerance)
+    np.testing.assert_allclose(scipy.fft.irfft2(state.data_spectrum, s=split.field_shape), relaxed, atol=tolerance)
+    np.testing.assert_allclose(state.hv, relaxed[:, :h, :w], atol=tolerance)
 
 
 @pytest.mark.parametrize("n_bands", [1, 2, 3, 64])
@@ -170,19 +186,21 @@ def test_h_is_the_models_convolution_in_the_window(tiny):
 @pytest.mark.parametrize("alpha", [1.0, 1.7])
 def test_the_splits_minimise_their_problems(tiny, alpha):
     """Against brute force, each split at its over-relaxed point (α·K v + (1 − α)·z + dual, z the split's last value:
-    x, u = s + η, w): x_p = argmin ½(b_p − f_pᵀx_p)² + μ₁/2‖x_p − q_p‖² (a K×K solve per pixel; q outside the window),
-    u = argmin τw_d|u| + μ₂,d/2(u − q)², w = argmin τ₁|w| + ι(w ≥ 0) + μ₃/2(w − q)² (grid searches); each dual = q − z,
-    and what the c-step reads: x − ξ, s = u − η, μ₃(w − ρ); the data term at v and w's change."""
+    x, u = s + η, w): x_p = argmin ½(b_p − f_pᵀx_p)² + μ₁/2‖x_p − q_p‖² (a K×K solve per pixel of the window, where
+    the host keeps the data split), u = argmin τw_d|u| + μ₂,d/2(u − q)², w = argmin τ₁|w| + ι(w ≥ 0) + μ₃/2(w − q)²
+    (grid searches); each dual = q − z, and what the c-step reads: x − ξ (in ``hv`` its change over the relaxed
+    y = αHv + (1 − α)(x − ξ) that the c-step left there and in Ŷ), s = u − η, μ₃(w − ρ); the data term at v and w's
+    change."""
     _, split = tiny
     p, (h, w) = split.penalties, split.sensor_shape
     state = random_state(split)
-    xi = np.zeros(split.shape)
-    xi[:, :h, :w] = state.xi
     u = state.s + state.eta
-    q_x = alpha * state.hv + (1 - alpha) * state.x + xi
+    relaxed = state.hv.copy()                                           # y, on the window
+    hv = (relaxed - (1 - alpha) * (state.x - state.xi)) / alpha
+    q_x = alpha * hv + (1 - alpha) * state.x + state.xi
     q_u = alpha * differences(split, state.v) + (1 - alpha) * u + state.eta
     q_w = alpha * state.v + (1 - alpha) * state.w + state.rho
-    fitted = np.einsum("khw,khw->hw", split.filters, state.hv[:, :h, :w])
+    fitted = np.einsum("khw,khw->hw", split.filters, hv)
     w_before = state.w.copy()
     data, (step, norm) = split.splits(state, alpha)
     assert data == pytest.approx(0.5 * np.sum((fitted - split.b) ** 2), rel=1e-12)
@@ -192,8 +210,8 @@ def test_the_splits_minimise_their_problems(tiny, alpha):
             f = split.filters[:, i, j]
             x[:, i, j] = np.linalg.solve(np.outer(f, f) + p.data * np.eye(3), f * split.b[i, j] + p.data * q_x[:, i, j])
     np.testing.assert_allclose(state.x, x, atol=1e-12)
-    np.testing.assert_allclose(state.xi, (q_x - x)[:, :h, :w], atol=1e-12)
-    np.testing.assert_allclose(state.hv, x - (q_x - x), atol=1e-12)
+    np.testing.assert_allclose(state.xi, q_x - x, atol=1e-12)
+    np.testing.assert_allclose(state.hv, x - (q_x - x) - relaxed, atol=1e-12)
     for i, axis in enumerate(split.axes):
         weight = split.tv.weight * split.tv.axis_weights[axis] / p.tv_along(axis)
         u = np.array([grid_argmin(lambda g: weight * np.abs(g), q) for q in q_u[i].ravel()[:40]])
@@ -246,7 +264,9 @@ def test_the_compiled_passes_match_numpys_from_one_random_state(monkeypatch, dty
     """From the same random state of a 5-band camera of 6×7 pixels, in one-row blocks on two threads: the splits
     (over-relaxed) and the TV adjoint, on every TV axis, some or none, leave the same arrays as NumPy's, bit for bit
     but the x-step's (whose sums over the bands run in float64 where NumPy's einsum rounds to the cube's precision:
-    within float32's elementwise rule, 2·10⁻⁶ of the array's largest), and return the same sums to that rule."""
+    within float32's elementwise rule, 2·10⁻⁶ of the array's largest), and return the same sums to that rule; the
+    solve along λ (with and without TV along λ's coupling) leaves its three spectra within that rule (complex
+    products rounded their own way)."""
     monkeypatch.setattr(blocks, "BLOCK_BYTES", 1)
     steps = [camera_steps(kind, np.random.default_rng(9), dtype, 5, (6, 7), tv_weights)[1]
              for kind in (Splitting, JitSplitting)]
@@ -265,6 +285,12 @@ def test_the_compiled_passes_match_numpys_from_one_random_state(monkeypatch, dty
             assert np.abs(ours - numpys).max() <= rule * np.abs(numpys).max(), name
         else:
             np.testing.assert_array_equal(ours, numpys, err_msg=name)
+    spectra = [numpy_state.data_spectrum, numpy_state.data_spectrum[::-1], numpy_state.data_spectrum * 0.5]
+    solved = [[np.array(a) for a in spectra] for _ in steps]
+    for split, arrays in zip(steps, solved):
+        split._band_solve(*arrays)
+    for ours, numpys in zip(*solved[::-1]):
+        assert np.abs(ours - numpys).max() <= rule * np.abs(numpys).max()
 
 
 @pytest.mark.parametrize("dtype, tolerance", [("float64", 1e-12), ("float32", 1e-5)])
@@ -367,7 +393,7 @@ def test_a_new_nonneg_penalty_keeps_the_unscaled_dual_and_the_right_hand_side_it
     state = random_state(split)
     old = split.penalties
     state.rest[...] = old.nonneg * (state.w - state.rho)          # what the last w-step left
-    before = {name: getattr(state, name).copy() for name in ("v", "hv", "x", "xi", "w", "eta", "s")}
+    before = {name: getattr(state, name).copy() for name in ("v", "hv", "x", "xi", "w", "eta", "s", "data_spectrum")}
     unscaled = old.nonneg * state.rho
     new = balance.repenalise(split, state, model.backend, dataclasses.replace(old, nonneg=0.3 * old.nonneg))
     assert np.allclose(new.nonneg * state.rho, unscaled, rtol=1e-12, atol=1e-15)
@@ -378,19 +404,20 @@ def test_a_new_nonneg_penalty_keeps_the_unscaled_dual_and_the_right_hand_side_it
 
 
 def test_a_new_data_penalty_keeps_the_unscaled_dual_and_the_data_term_it_implies(tiny):
-    """repenalise with μ₁ → μ₁' (and every other penalty with it): the unscaled dual μ₁ξ as before, ``hv`` the new
-    x − ξ' on the sensor window where it was x − ξ, and outside the window untouched."""
+    """repenalise with μ₁ → μ₁' (and every other penalty with it): the unscaled dual μ₁ξ as before, the c-step's
+    x − ξ the new x − ξ' on the sensor window where it was x − ξ (a change in ``hv``), Ŷ and x untouched."""
     model, split = tiny
     state = random_state(split)
     (h, w), old = split.sensor_shape, split.penalties
-    state.hv[:, :h, :w] = state.x[:, :h, :w] - state.xi                # what the last x-step left
-    outside, unscaled = state.hv.copy(), old.data * state.xi
+    split_x = data_input(split, state)
+    split_x[:, :h, :w] += state.xi
+    kept, unscaled = {name: getattr(state, name).copy() for name in ("x", "data_spectrum")}, old.data * state.xi
     new = balance.repenalise(split, state, model.backend, old.scaled(0.4))
     assert new.data == pytest.approx(0.4 * old.data, rel=1e-15) and new.tv_balance == old.tv_balance
     assert np.allclose(new.data * state.xi, unscaled, rtol=1e-12, atol=1e-15)
-    assert np.allclose(state.hv[:, :h, :w], state.x[:, :h, :w] - state.xi, rtol=1e-12, atol=1e-14)
-    outside[:, :h, :w] = state.hv[:, :h, :w]
-    assert np.array_equal(state.hv, outside)
+    split_x[:, :h, :w] -= state.xi
+    assert np.allclose(data_input(split, state), split_x, rtol=1e-12, atol=1e-14)
+    assert all(np.array_equal(getattr(state, name), value) for name, value in kept.items())
     assert split._gain is split.terms.for_penalties(new, split.axes)[0]
 
 

@@ -6,7 +6,7 @@ import scipy.fft
 import clsdcam.backends.host_convolution as host_convolution
 from clsdcam.backends.convolution import HostPathConvolution, PrimitiveConvolution
 from clsdcam.backends.host_convolution import HostConvolution, band_chunks
-from clsdcam.backends.host_fft import irfft2
+from clsdcam.backends.host_fft import irfft2, irfft2_to_window, rfft2_of_window
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.camera.geometry import support_geometry, transfer_function
 
@@ -44,6 +44,30 @@ def test_the_inverse_in_two_passes_is_pocketffts_irfft2(shape, dtype):
     overwritten = irfft2(spectrum, shape, workers=2, overwrite=True)
     assert np.max(np.abs(overwritten - expected)) <= rule * np.max(np.abs(expected))
     assert np.max(np.abs(overwritten - field)) <= 10 * rule * np.max(np.abs(field))
+
+
+@pytest.mark.parametrize("field, window", [((8, 10), (4, 5)), ((9, 15), (5, 8)), ((6, 7), (6, 7))])
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_the_pruned_transforms_are_the_whole_ones_at_the_window(field, window, dtype):
+    """rfft2_of_window is rfft2 of the window zero-padded at the origin, irfft2_to_window the window of irfft2, even
+    and odd lengths, a window as large as the field among them: within the float rule of their precision, the spectrum
+    kept unless ``overwrite`` lets the column pass run on it."""
+    rng = np.random.default_rng(4)
+    rule = 2e-6 + 5e-7 * np.log10(np.prod(field)) if dtype == "float32" else 1e-13
+    inside = rng.standard_normal((3,) + window).astype(dtype)
+    padded = np.zeros((3,) + field, dtype)
+    padded[:, :window[0], :window[1]] = inside
+    expected = scipy.fft.rfft2(padded)
+    got = rfft2_of_window(inside, field, workers=2)
+    assert got.dtype == expected.dtype and got.shape == expected.shape
+    assert np.max(np.abs(got - expected)) <= rule * np.max(np.abs(expected))
+    spectrum = scipy.fft.rfft2(rng.standard_normal((3,) + field)).astype(expected.dtype)
+    kept, whole = spectrum.copy(), scipy.fft.irfft2(spectrum, s=field)[:, :window[0], :window[1]]
+    back = irfft2_to_window(spectrum, field, window)
+    assert back.shape == (3,) + window and np.max(np.abs(back - whole)) <= rule * np.max(np.abs(whole))
+    np.testing.assert_array_equal(spectrum, kept)
+    back = irfft2_to_window(spectrum, field, window, overwrite=True)
+    assert back.shape == (3,) + window and np.max(np.abs(back - whole)) <= rule * np.max(np.abs(whole))
 
 
 @pytest.mark.parametrize("chunk_bytes", [1, 3 << 10, 1 << 30])   # one band per chunk, a few, all at once

@@ -443,8 +443,10 @@ def admm_pair(dtype, backend, tv_weights=TV_AXES["every axis"], n_bands=5):
 
 
 def random_states(pair, backend):
-    """The same state on both sides of ``pair``, every array and both spectra random (normal); made directly, with
-    no transform (Oclgrind checks reikna's kernels for races only)."""
+    """The same state on both sides of ``pair``, every array random (normal), the kernels' as they keep it (the
+    data split over the field; :func:`host_state` gives NumPy's its own), and two random spectra for the solve along
+    λ apart from them: (NumPy's state, the kernels', the spectra). Made directly, with no transform (Oclgrind checks
+    reikna's kernels for races only)."""
     from clsdcam.algorithms.admm.terms import SplitState
 
     rng, split = np.random.default_rng(6), pair[0]
@@ -456,18 +458,44 @@ def random_states(pair, backend):
     spectrum = (bands, split.field_shape[0], split.field_shape[1] // 2 + 1)
     spectra = tuple((rng.standard_normal(spectrum) + 1j * rng.standard_normal(spectrum)).astype(split.cdtype)
                     for _ in range(2))
-    ref = SplitState(**{name: a.copy() for name, a in host.items()}, spectra=tuple(s.copy() for s in spectra))
     got = SplitState(**{name: backend.to_device(a) for name, a in host.items()},
                      spectra=tuple(backend.to_device(s, complex_=True) for s in spectra))
-    return ref, got
+    return host_state(split, host), got, spectra
 
 
-def assert_states_match(ref, got, backend, tolerance):
+def host_state(split, field: dict):
+    """NumPy's state for the kernels' arrays ``field`` (host copies, Hv over the field in ``hv``): x and ξ on the
+    window, y = αHv + (1 − α)(x − ξ) as Ŷ and on the window in ``hv``, what its c-step would have left (host_steps'
+    module docstring)."""
+    from clsdcam.algorithms.admm.terms import SplitState
+
+    (h, w), alpha = split.sensor_shape, split.relaxation
+    relaxed = alpha * field["hv"] + (1 - alpha) * field["x"]
+    relaxed[:, :h, :w] -= (1 - alpha) * field["xi"]
+    window = {"hv": relaxed[:, :h, :w].astype(split.dtype), "x": np.array(field["x"][:, :h, :w])}
+    spectrum = (split.n_bands, split.field_shape[0], split.field_shape[1] // 2 + 1)
+    return SplitState(**{name: np.array(a) for name, a in field.items()} | window,
+                      spectra=tuple(np.zeros(spectrum, split.cdtype) for _ in range(2)),
+                      data_spectrum=np.fft.rfft2(relaxed).astype(split.cdtype))
+
+
+def data_split_field(split, state) -> tuple[np.ndarray, np.ndarray]:
+    """NumPy's (x, x − ξ) over the field after the splits, from Ŷ and the window's arrays."""
+    (h, w), x = split.sensor_shape, split.data_split(state)
+    y = x.copy()
+    y[:, :h, :w] -= state.xi
+    return x, y
+
+
+def assert_states_match(pair, ref, got, backend, tolerance):
+    """Every array alike after the splits, the data split's over the field: the kernels' x and x − ξ (in ``hv``)
+    against NumPy's from Ŷ and its window's arrays."""
+    x, y = data_split_field(pair[0], ref)
+    theirs = {name: getattr(ref, name) for name in STATE} | {"x": x, "hv": y}
     for name in STATE:
-        ours, theirs = backend.to_host(getattr(got, name)), getattr(ref, name)
-        assert ours.shape == theirs.shape and (not theirs.size or relative_error(ours, theirs) <= tolerance), name
-    for ours, theirs in zip(got.spectra, ref.spectra):
-        assert relative_error(backend.to_host(ours), theirs) <= tolerance
+        ours = backend.to_host(getattr(got, name))
+        ref = theirs[name]
+        assert ours.shape == ref.shape and (not ours.size or relative_error(ours, ref) <= tolerance), name
 
 
 def flat_numbers(numbers) -> np.ndarray:
@@ -476,40 +504,55 @@ def flat_numbers(numbers) -> np.ndarray:
     return np.array([data, step, norm])
 
 
+def assert_band_solves_match(pair, spectra, backend, tolerance):
+    """The c-step's solve along λ from the same two spectra (x − ξ's and the rest's; NumPy's Ŷ given as its sum with
+    the window's change): v̂ alike, and NumPy's Ŷ then αĤv̂ + (1 − α)Ŷ with the kernels' Ĥv̂."""
+    data, rest = (backend.to_device(s.copy(), complex_=True) for s in spectra)
+    pair[1]._band_solve(data, rest)
+    change = (0.3 * spectra[1]).astype(spectra[0].dtype)
+    kept, solved = spectra[0] - change, spectra[1].copy()
+    pair[0]._band_solve(kept, change, solved)
+    alpha = pair[0].relaxation
+    assert relative_error(backend.to_host(data), solved) <= tolerance
+    assert relative_error(kept, alpha * backend.to_host(rest) + (1 - alpha) * spectra[0]) <= tolerance
+
+
 @pytest.mark.parametrize("axes", list(TV_AXES))
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_admm_splits_tv_adjoint_and_band_solve_match_numpy(dtype, axes, path):
-    """From the same random state: the splits (x-, w- and u-steps with their duals and sums, over-relaxed), the TV
-    adjoint and the c-step's solve along λ (the right-hand side, the sweeps, Ĥ·v̂), and every dual's rescaling for new
-    penalties, agree with NumPy's to the elementwise rule (float64: 1e-12), with TV on every axis, on some (the
-    kernels skip the others), or none (zero-size split arrays); each axis with its own TV penalty."""
+    """From the same random state: the splits (x-, w- and u-steps with their duals and sums, over-relaxed; the data
+    split's compared over the field, where NumPy keeps it as a spectrum and the window), the TV adjoint and the
+    c-step's solve along λ (the right-hand side, the sweeps, Ĥ·v̂), and every dual's rescaling for new penalties,
+    agree with NumPy's to the elementwise rule (float64: 1e-12), with TV on every axis, on some (the kernels skip
+    the others), or none (zero-size split arrays); each axis with its own TV penalty."""
     backend = opencl(dtype, PATH_BACKEND[path])
     pair = admm_pair(dtype, backend, TV_AXES[axes])
     assert type(pair[0]).__name__ == "Splitting"
     assert [len(split.axes) for split in pair] == [3 - TV_AXES[axes].count(0.0) if TV_AXES[axes] else 0] * 2
-    ref, got = random_states(pair, backend)
+    ref, got, spectra = random_states(pair, backend)
     tolerance = 2e-6 if dtype == "float32" else 1e-12
 
-    def splits_agree():
+    def splits_agree(ref):
         numbers = [flat_numbers(split.splits(state, RELAXATION)) for split, state in zip(pair, (ref, got))]
         assert np.allclose(numbers[1], numbers[0], rtol=tolerance, atol=0)
-        assert_states_match(ref, got, backend, tolerance)
+        assert_states_match(pair, ref, got, backend, tolerance)
 
-    splits_agree()
+    splits_agree(ref)
     for split, state in zip(pair, (ref, got)):
         split._add_tv_adjoint(state)
-        split._band_solve(*state.spectra)
-    assert_states_match(ref, got, backend, tolerance)
+    assert_states_match(pair, ref, got, backend, tolerance)
+    assert_band_solves_match(pair, spectra, backend, tolerance)
     for split, state in zip(pair, (ref, got)):
         split.rescale_tv_duals(state, {0: 0.3, 1: 2.5, 2: 1.1})
-    assert_states_match(ref, got, backend, tolerance)
+    assert_states_match(pair, ref, got, backend, tolerance)
     from clsdcam.algorithms.admm.balance import repenalise
 
     for split, state, be in zip(pair, (ref, got), (NumpyBackend(dtype), backend)):
         old = split.penalties
         repenalise(split, state, be, replace(old.scaled(0.5), nonneg=0.3 * old.nonneg))
-    assert_states_match(ref, got, backend, tolerance)
-    splits_agree()                                  # the splits under the new penalties
+    assert_states_match(pair, ref, got, backend, tolerance)
+    # the splits under the new penalties, from the kernels' arrays as they are (``hv`` read as Hv)
+    splits_agree(host_state(pair[0], {name: backend.to_host(getattr(got, name)) for name in STATE}))
 
 
 @pytest.mark.parametrize("n_bands", [1, 2])
@@ -520,10 +563,7 @@ def test_admm_band_solve_matches_numpy_on_one_and_two_bands(dtype, n_bands, path
     backend = opencl(dtype, PATH_BACKEND[path])
     pair = admm_pair(dtype, backend, n_bands=n_bands)
     assert [split.n_bands for split in pair] == [n_bands] * 2 and pair[0].coupling > 0
-    ref, got = random_states(pair, backend)
-    for split, state in zip(pair, (ref, got)):
-        split._band_solve(*state.spectra)
-    assert_states_match(ref, got, backend, 2e-6 if dtype == "float32" else 1e-12)
+    assert_band_solves_match(pair, random_states(pair, backend)[2], backend, 2e-6 if dtype == "float32" else 1e-12)
 
 
 def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_memory):

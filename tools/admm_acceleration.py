@@ -32,16 +32,18 @@ from dataclasses import replace
 import numpy as np
 
 CORRELATION = 0.2         # the spectral penalties' safeguard: an estimate whose pair correlates less is not used
-LINEAR_IN_SPLITS = ("x", "w", "s", "eta", "xi", "rho", "hv", "rest")   # the state's arrays after the splits
+# the state's arrays after the splits (the host's: Ŷ for x − ξ over the field, the window's change in hv)
+LINEAR_IN_SPLITS = ("x", "w", "s", "eta", "xi", "rho", "hv", "rest", "data_spectrum")
 
 
 def split_variables(split, state) -> tuple[list, list]:
     """(z, y) on the data, TV and non-negativity splits, new arrays, from the state after the splits: z = (x,
     u_d = s_d + η_d, w), y = (ξ on the sensor window and 0 outside it, η_d, ρ)."""
     h, w = split.sensor_shape
-    xi = np.zeros_like(state.x)
+    x = split.data_split(state)
+    xi = np.zeros_like(x)
     xi[:, :h, :w] = state.xi
-    return [state.x.copy(), state.s + state.eta, state.w.copy()], [xi, state.eta.copy(), state.rho.copy()]
+    return [x, state.s + state.eta, state.w.copy()], [xi, state.eta.copy(), state.rho.copy()]
 
 
 def split_inputs(split, state) -> list[np.ndarray]:
@@ -50,17 +52,15 @@ def split_inputs(split, state) -> list[np.ndarray]:
 
 
 def set_split_inputs(split, state, q: list[np.ndarray]) -> None:
-    """The state the splits leave from the inputs ``q``: each prox and dual, and what the c-step reads (x − ξ in
-    ``hv``, μ₃(w − ρ) in ``rest``, s_d = u_d − η_d)."""
+    """The state the splits leave from the inputs ``q``: each prox and dual, and what the c-step reads (x − ξ,
+    μ₃(w − ρ) in ``rest``, s_d = u_d − η_d)."""
     h, w = split.sensor_shape
     data, tv, nonneg = q
-    window = data[:, :h, :w]
-    misfit = split.b - np.einsum("khw,khw->hw", split.filters, window)
-    np.multiply(split._gain, -misfit, out=state.xi)
-    state.x[...] = data
-    state.x[:, :h, :w] -= state.xi
-    state.hv[...] = state.x
-    state.hv[:, :h, :w] -= state.xi
+    misfit = split.b - np.einsum("khw,khw->hw", split.filters, data[:, :h, :w])
+    xi = split._gain * -misfit
+    x = data.copy()
+    x[:, :h, :w] -= xi
+    split.set_data_split(state, x, xi)
     for i, axis in enumerate(split.axes):
         bound = split.threshold(axis)
         np.clip(tv[i], -bound, bound, out=state.eta[i])
@@ -202,7 +202,7 @@ def split_images(split, state) -> list[np.ndarray]:
     from clsdcam.algorithms.admm.host_steps import difference
 
     tv = np.stack([difference(state.v, axis, np.empty_like(state.v)) for axis in split.axes]) if split.axes else None
-    return [state.hv.copy(), tv, state.v.copy()]
+    return [split.convolve(state.v).astype(split.dtype), tv, state.v.copy()]
 
 
 def change_penalties(split, state, penalties) -> None:

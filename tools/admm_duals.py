@@ -34,16 +34,14 @@ XI_ALONE, EVERY_DUAL = 1, 2
 def fixed_point_duals(split, state, w: np.ndarray, kind: int = EVERY_DUAL) -> None:
     """Set ``state``'s splits to ``w``'s (x = Hw, w) and its duals to their fixed-point values for w (the module
     docstring): ξ, and with ``kind`` EVERY_DUAL also η_d (with s_d = D_d w − η_d) and ρ; then what the next c-step
-    reads of them (x − ξ in ``hv``, μ₃(w − ρ) in ``rest``)."""
+    reads of them (x − ξ, μ₃(w − ρ) in ``rest``)."""
     from clsdcam.algorithms.admm.host_steps import difference, difference_adjoint_add
 
     p, (h, wd) = split.penalties, split.sensor_shape
     w = np.maximum(np.asarray(w, split.dtype), 0)
     hw = split.convolve(w).astype(split.dtype)
     misfit = split.b - np.einsum("khw,khw->hw", split.filters, hw[:, :h, :wd])
-    state.xi[...] = -split.filters * (misfit / p.data)
-    state.x[...] = state.hv[...] = hw
-    state.hv[:, :h, :wd] -= state.xi
+    split.set_data_split(state, hw, -split.filters * (misfit / p.data))
     state.w[...] = w
     if kind != EVERY_DUAL:
         return

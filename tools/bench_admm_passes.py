@@ -5,12 +5,13 @@ thread, with each of its steps' passes timed.
     python tools/bench_admm_passes.py --size 128x160 --bands 64 --iters 60
     PYTHONPATH=OTHER_CHECKOUT python tools/bench_admm_passes.py --size 128x160 ...   # another checkout's passes
 
-The passes (:mod:`clsdcam.algorithms.admm`): the c-step's forward and inverse transforms, its solve along λ and the
-TV adjoint; the x-, w- and u-steps (each axis's u-step counted together), the compiled ones where Numba is installed
-(``jit_steps``), else NumPy's (``host_steps``: the x-, w- and u-steps then count as one). A pass's figure is its
-wall-clock time in the solve, everything it calls included, in milliseconds per iteration; "the rest" is the
-solve's other time (the checkpoints, the records, the driver). A short solve first compiles or loads the passes and
-plans the transforms; it is not counted. Timings drift ±30 % between runs: compare two checkouts in alternating
+The passes (:mod:`clsdcam.algorithms.admm`): the c-step's forward and inverse transforms (the data split's pruned to
+the sensor window apart, where a checkout has them), its solve along λ and the TV adjoint; the x-, w- and u-steps
+(each axis's u-step counted together), the compiled ones where Numba is installed (``jit_steps``, the solve along λ
+too where a checkout compiles it), else NumPy's (``host_steps``: the x-, w- and u-steps then count as one). A pass's
+figure is its wall-clock time in the solve, everything it calls included, in milliseconds per iteration; "the rest"
+is the solve's other time (the checkpoints, the records, the driver). A short solve first compiles or loads the passes
+and plans the transforms; it is not counted. Timings drift ±30 % between runs: compare two checkouts in alternating
 runs, and read each pass against the others in the same run.
 """
 from __future__ import annotations
@@ -28,25 +29,27 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_breakdown import Clock  # noqa: E402
 from report import emit  # noqa: E402
 
-# part -> the attribute timed: the c-step's parts on host_steps.Splitting (the compiled steps inherit them), the
-# splits' compiled passes in jit_steps, or NumPy's splits as one
-HOST_PASSES = {"forward transforms": "_rfft2", "inverse transforms": "_irfft2", "solve along λ": "_band_solve",
-               "TV adjoint": "_add_tv_adjoint"}
-COMPILED_PASSES = {"x-step": "x_pass", "w-step": "w_pass", "u-step": "u_pass"}
+# part -> the attribute timed: the c-step's parts on host_steps.Splitting (the compiled steps inherit them, but for
+# the solve along λ where they compile it), the compiled passes in jit_steps, or NumPy's splits as one
+HOST_PASSES = {"forward transforms": "_rfft2", "inverse transforms": "_irfft2",
+               "pruned forward transforms": "_window_rfft2", "pruned inverse transforms": "_irfft2_to_window",
+               "solve along λ": "_band_solve", "TV adjoint": "_add_tv_adjoint"}
+COMPILED_PASSES = {"x-step": "x_pass", "w-step": "w_pass", "u-step": "u_pass", "solve along λ": "band_pass"}
 NUMPY_SPLITS = "x-, w- and u-steps"
 
 
 def passes() -> dict:
-    """part -> (owner, attribute name) to time: the compiled passes where ADMM's host steps are compiled."""
+    """part -> (owner, attribute name) to time: the compiled passes where ADMM's host steps are compiled; the parts
+    the checkout has."""
     from clsdcam.algorithms.admm import algorithm
     from clsdcam.algorithms.admm.host_steps import Splitting
 
-    parts = {part: (Splitting, name) for part, name in HOST_PASSES.items()}
+    parts = {part: (Splitting, name) for part, name in HOST_PASSES.items() if hasattr(Splitting, name)}
     if algorithm.host_steps() is Splitting:
         return parts | {NUMPY_SPLITS: (Splitting, "splits")}
     from clsdcam.algorithms.admm import jit_steps
 
-    return parts | {part: (jit_steps, name) for part, name in COMPILED_PASSES.items()}
+    return parts | {part: (jit_steps, name) for part, name in COMPILED_PASSES.items() if hasattr(jit_steps, name)}
 
 
 def timed_solve(sim, iters: int, parts: dict) -> dict:

@@ -17,7 +17,7 @@ EXPORTS = {   # name -> the module of this package that defines it, imported whe
     **dict.fromkeys(("OpenCLBackend",), "opencl"),
     **dict.fromkeys(("map_blocks", "scratch_buffer", "THREADS_VARIABLE", "available_cores", "host_threads"), "blocks"),
     **dict.fromkeys(("seen_bands",), "host_convolution"),
-    **dict.fromkeys(("irfft2",), "host_fft"),
+    **dict.fromkeys(("irfft2", "irfft2_to_window", "rfft2_of_window"), "host_fft"),
     **dict.fromkeys(("CASES", "Inputs", "benchmarks"), "cases"),
     **dict.fromkeys(("available_engines",), "fft"),
     **dict.fromkeys(("all_devices", "import_pyopencl", "choose_device", "describe", "format_devices", "has_fp64",

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft
 
-from .host_fft import irfft2
+from .host_fft import irfft2, irfft2_to_window, rfft2_of_window
 
 CHUNK_BYTES = 4 << 20      # spectrum bytes per chunk of bands: measured best at 64×576×800 (2 bands)
 
@@ -66,24 +66,20 @@ class HostConvolution:
 
     def forward(self, v: np.ndarray, out: np.ndarray) -> np.ndarray:
         """b = Σ_k F_k ⊙ [irfft2(Ĥ · rfft2(v_k))]_{0:H, 0:W}, chunk by chunk."""
-        (h, w), wp = self.sensor_shape, self.field_shape[1]
         out[...] = 0
         for k0, k1 in self.chunks:
             spectrum = scipy.fft.rfft2(v[k0:k1], workers=self.workers)
             spectrum *= self.transfer
-            columns = scipy.fft.ifft(spectrum, axis=-2, workers=self.workers, overwrite_x=True)[:, :h]
-            window = scipy.fft.irfft(columns, n=wp, axis=-1, workers=self.workers)[..., :w]
+            window = irfft2_to_window(spectrum, self.field_shape, self.sensor_shape, self.workers, overwrite=True)
             out += np.einsum("khw,khw->hw", self.filters[k0:k1], window)
         return out
 
     def adjoint(self, r: np.ndarray, out: np.ndarray, y: np.ndarray | None = None, step: float = 1.0) -> np.ndarray:
         """out = Aᵀr, or the gradient step out = y − step·Aᵀr when y is given (out may be y)."""
-        hp, wp = self.field_shape
         for k0, k1 in self.chunks:
-            rows = scipy.fft.rfft(self.filters[k0:k1] * r, n=wp, axis=-1, workers=self.workers)
-            spectrum = scipy.fft.fft(rows, n=hp, axis=-2, workers=self.workers, overwrite_x=True)
+            spectrum = rfft2_of_window(self.filters[k0:k1] * r, self.field_shape, self.workers)
             spectrum *= self.conj_transfer
-            gradient = irfft2(spectrum, (hp, wp), self.workers, overwrite=True)
+            gradient = irfft2(spectrum, self.field_shape, self.workers, overwrite=True)
             if y is None:
                 out[k0:k1] = gradient
             else:

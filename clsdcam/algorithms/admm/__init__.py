@@ -43,7 +43,8 @@ Each split's dual follows its step: with q = K·v + dual, z = prox(q), dual⁺ =
 of the split, z − dual⁺ = 2z − q, is formed in the same pass, and neither u nor x is kept:
 
 * data: ξ⁺ = −f_p·(b_p − f_pᵀq_p)/(μ₁ + ‖f_p‖²) on the window and 0 outside it (kept on the window only), and
-  x − ξ⁺ = q + 2(x − q) is written over Hv;
+  x − ξ⁺ = q + 2(x − q) is written over Hv (the host keeps x − ξ as its spectrum and steps it there, its x-step on
+  the window alone: :mod:`.host_steps`);
 * TV: η_d⁺ = clip(q, ±τw_d/μ₂) (the soft threshold's remainder) and s_d = u_d − η_d⁺ = q − 2η_d⁺;
 * non-negativity: ρ⁺ = q − w and μ₃(w − ρ⁺), the start of the next right-hand side, to which one more pass adds
   μ₂ΣD_dᵀs_d.

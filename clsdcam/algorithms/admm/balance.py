@@ -101,7 +101,7 @@ def repenalise(split: SplittingBase, state: SplitState, backend, new: Penalties)
     old = split.penalties
     if new.data != old.data:
         keep = old.data / new.data
-        window = backend.pad(state.xi, split.field_shape, (0, 0))
+        window = backend.pad(state.xi, state.hv.shape[-2:], (0, 0))     # the field's, or the window's on the host
         backend.axpy(1.0 - keep, window, state.hv, out=state.hv)
         backend.scale(keep, state.xi, out=state.xi)
     ratios = {axis: old.tv_along(axis) / new.tv_along(axis) for axis in split.axes}

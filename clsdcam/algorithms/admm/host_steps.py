@@ -1,13 +1,22 @@
 """ADMM's steps on NumPy arrays: :class:`Splitting`, the iteration :mod:`clsdcam.algorithms.admm` derives, with both
 passes and the c-step's solve along λ on cache-sized row blocks on the host's threads (``backends/blocks``): the
 iteration reads each cube about twice besides its transforms. The first differences D_d and their adjoints, and
-the tridiagonal sweeps along λ, are here too."""
+the tridiagonal sweeps along λ, are here too.
+
+The data split on the sensor window. Outside the window the x-step is the relaxation alone (ξ = 0 there): x − ξ
+becomes y = αHv + (1 − α)(x − ξ). So the host keeps x − ξ over the field as its spectrum Ŷ and steps it there, and x
+and ξ on the window only: the c-step, having v̂, sets Ŷ ← αĤv̂ + (1 − α)Ŷ and transforms y back to the window alone,
+into ``hv``; the x-step there reads Hv = (y − (1 − α)(x − ξ))/α and q = αHv + (1 − α)x + ξ = y + (2 − α)ξ, and
+leaves in ``hv`` what x − ξ gained over y, x⁺ − ξ⁺ − y = (2 − α)ξ − 2ξ⁺ (x⁺ − ξ⁺ = q − 2ξ⁺); the next c-step adds
+its transform to Ŷ. Both of those transforms are pruned to the window (``backends/host_fft``), where the kernels
+transform the whole field, and the x-step skips the field outside the window. The iterates are the kernels' but for
+rounding (tests/test_parity.py)."""
 from __future__ import annotations
 
 import numpy as np
 import scipy.fft
 
-from ...backends import irfft2, map_blocks, scratch_buffer
+from ...backends import irfft2, irfft2_to_window, map_blocks, rfft2_of_window, scratch_buffer
 from .terms import CalibrationTerms, SplitState, SplittingBase
 
 FFT_CHUNK_BYTES = 4 << 20     # spectrum bytes per chunk of bands in the transforms (host_convolution's)
@@ -114,35 +123,40 @@ class Splitting(SplittingBase):
 
     # ---- the state -----------------------------------------------------------------------------------------
     def start(self, v0: np.ndarray) -> tuple[SplitState, float]:
-        """The state from v = v0 with zero duals: Hv by one convolution (2K transforms), then every split's step
-        unrelaxed (there is no previous split to relax towards); and the data term at v0."""
-        cube, spectrum = self.shape, (self.n_bands, self.field_shape[0], self.field_shape[1] // 2 + 1)
-        per_axis = (len(self.axes),) + cube
+        """The state from v = v0 with zero duals: Ŷ = Ĥv̂, and Hv on the window (K forward transforms and K pruned
+        inverse ones), then every split's step unrelaxed (there is no previous split to relax towards); and the data
+        term at v0."""
+        cube, window = self.shape, (self.n_bands,) + self.sensor_shape
+        spectrum, per_axis = (self.n_bands, self.field_shape[0], self.field_shape[1] // 2 + 1), (len(self.axes),) + cube
         zeros = np.zeros
-        state = SplitState(v=np.array(v0, self.dtype), hv=zeros(cube, self.dtype), x=zeros(cube, self.dtype),
-                           xi=zeros((self.n_bands,) + self.sensor_shape, self.dtype), rho=zeros(cube, self.dtype),
-                           w=zeros(cube, self.dtype), eta=zeros(per_axis, self.dtype), s=zeros(per_axis, self.dtype),
-                           rest=zeros(cube, self.dtype),
+        state = SplitState(v=np.array(v0, self.dtype), hv=zeros(window, self.dtype), x=zeros(window, self.dtype),
+                           xi=zeros(window, self.dtype), rho=zeros(cube, self.dtype), w=zeros(cube, self.dtype),
+                           eta=zeros(per_axis, self.dtype), s=zeros(per_axis, self.dtype), rest=zeros(cube, self.dtype),
                            spectra=(zeros(spectrum, self.cdtype), zeros(spectrum, self.cdtype)),
-                           penalties=self.penalties)
-        state.hv[...] = self.convolve(state.v)
+                           penalties=self.penalties, data_spectrum=zeros(spectrum, self.cdtype))
+        self._rfft2(state.v, state.data_spectrum)
+        state.data_spectrum *= self.transfer
+        np.copyto(state.spectra[1], state.data_spectrum)
+        self._irfft2_to_window(state.spectra[1], state.hv)
         data, _ = self.splits(state)
         return state, data
 
     # ---- one iteration -------------------------------------------------------------------------------------
     def c_step(self, state: SplitState) -> None:
-        """v and Hv from the right-hand side the last splits left (x − ξ in ``hv``, the rest in ``rest``)."""
+        """v from the right-hand side the last splits left (x − ξ in Ŷ once the window's change in ``hv`` is added,
+        the rest in ``rest``); Ŷ then the relaxed αĤv̂ + (1 − α)Ŷ, and ``hv`` its window (the module docstring)."""
+        solved, change = state.spectra
+        self._window_rfft2(state.hv, change)
         self._add_tv_adjoint(state)
-        data, rest = state.spectra
-        self._rfft2(state.hv, data)
-        self._rfft2(state.rest, rest)
-        self._band_solve(data, rest)             # v̂ into ``data``, Ĥ·v̂ into ``rest``
-        self._irfft2(data, state.v)
-        self._irfft2(rest, state.hv)
+        self._rfft2(state.rest, solved)
+        self._band_solve(state.data_spectrum, change, solved)       # Ŷ, and its copy in ``change``
+        self._irfft2(solved, state.v)
+        self._irfft2_to_window(change, state.hv)
 
     def splits(self, state: SplitState, alpha: float = 1.0) -> tuple[float, tuple[float, float]]:
-        """Every split's step and dual, relaxed by ``alpha``, on row blocks, and what the next c-step needs of them
-        (the module docstring); the data term at v and the change of w."""
+        """Every split's step and dual, relaxed by ``alpha`` (the last c-step's relaxation, or 1 after the start), on
+        row blocks, and what the next c-step needs of them (the module docstring); the data term at v and the change
+        of w."""
         k, hp, wp = self.shape
         parts = map_blocks(lambda y0, y1, scratch: self._split_block(state, y0, y1, scratch, alpha), hp,
                            k * wp * self.dtype.itemsize, self.workers)
@@ -157,30 +171,28 @@ class Splitting(SplittingBase):
         return data, step, norm
 
     def _x_block(self, state: SplitState, y0: int, y1: int, alpha: float) -> float:
-        """q = αHv + (1 − α)x (+ ξ on the window); ξ ← −f·(b − fᵀq)/(μ₁ + ‖f‖²) and x ← q − ξ on the window, x ← q
-        outside it; Hv ← x − ξ. The data term ½‖fᵀHv − b‖² over the block's window rows (at v, before the step)."""
-        h, w = self.sensor_shape
-        q, x = state.hv[:, y0:y1], state.x[:, y0:y1]
-        data = self._data_term(q, y0, y1)
-        relax(q, x, alpha)
-        x[...] = q
-        if y0 < h:
-            rows = slice(y0, min(y1, h))
-            window, x_window = q[:, :rows.stop - y0, :w], x[:, :rows.stop - y0, :w]
-            window += state.xi[:, rows]
-            misfit = self.b[rows] - np.einsum("khw,khw->hw", self.filters[:, rows], window)
-            xi = np.multiply(self._gain[:, rows], -misfit, out=state.xi[:, rows])
-            np.subtract(window, xi, out=x_window)
-            np.subtract(x_window, xi, out=window)
-        return data
-
-    def _data_term(self, hv: np.ndarray, y0: int, y1: int) -> float:
-        """½‖fᵀHv − b‖² over the window's rows among y0…y1 (0 below the window)."""
-        h, w = self.sensor_shape
+        """On the window's rows among y0…y1, from y = αHv + (1 − α)(x − ξ) in ``hv``: q = y + (2 − α)ξ; ξ⁺ = −f·(b −
+        fᵀq)/(μ₁ + ‖f‖²), x ← q − ξ⁺, ``hv`` ← (2 − α)ξ − 2ξ⁺ (the module docstring), ξ ← ξ⁺. The data term
+        ½‖fᵀHv − b‖² over those rows (at v, before the step), Hv = (y − (1 − α)(x − ξ))/α."""
+        h = self.sensor_shape[0]
         if y0 >= h:
             return 0.0
         rows = slice(y0, min(y1, h))
-        residual = np.einsum("khw,khw->hw", self.filters[:, rows], hv[:, :rows.stop - y0, :w]) - self.b[rows]
+        q, x, xi = state.hv[:, rows], state.x[:, rows], state.xi[:, rows]
+        one, alpha = self.dtype.type(1), self.dtype.type(alpha)
+        data = self._data_term((q - (one - alpha) * (x - xi)) / alpha, rows)
+        q += (one + one - alpha) * xi
+        misfit = self.b[rows] - np.einsum("khw,khw->hw", self.filters[:, rows], q)
+        stepped = np.multiply(self._gain[:, rows], -misfit)
+        np.subtract(q, stepped, out=x)
+        np.multiply(xi, one + one - alpha, out=q)
+        q -= 2 * stepped
+        xi[...] = stepped
+        return data
+
+    def _data_term(self, hv: np.ndarray, rows: slice) -> float:
+        """½‖fᵀHv − b‖² over the window's ``rows`` (``hv`` those rows of Hv)."""
+        residual = np.einsum("khw,khw->hw", self.filters[:, rows], hv) - self.b[rows]
         return 0.5 * float(np.vdot(residual.astype(np.float64), residual))
 
     def _w_block(self, state: SplitState, y0: int, y1: int, scratch: dict, alpha: float) -> tuple[float, float]:
@@ -246,32 +258,76 @@ class Splitting(SplittingBase):
             state.s[i] += (self.dtype.type(1) - r) * state.eta[i]
             state.eta[i] *= r
 
-    def _band_solve(self, data: np.ndarray, rest: np.ndarray) -> None:
-        """data ← v̂, the system along λ at each Fourier coefficient for the right-hand side μ₁conj(Ĥ)·data + rest
-        (:func:`sweep_bands`), rest ← Ĥ·v̂; on row blocks of the spectra."""
+    def _band_solve(self, data: np.ndarray, change: np.ndarray, rest: np.ndarray) -> None:
+        """data += change; rest ← v̂, the system along λ at each Fourier coefficient for the right-hand side
+        μ₁conj(Ĥ)·data + rest (:func:`sweep_bands`); data ← α·Ĥv̂ + (1 − α)·data (α the relaxation), and ``change``
+        a copy of it (for the transform to the window, which spends it); on row blocks of the spectra."""
         k, rows, cols = data.shape
         coupling = self.dtype.type(self.coupling)
+        alpha = self.dtype.type(self.relaxation)
 
         def block(y0, y1, scratch):
-            spectrum = data[:, y0:y1]
-            spectrum *= self._data_transfer[y0:y1]
-            spectrum += rest[:, y0:y1]
+            spectrum, kept = rest[:, y0:y1], data[:, y0:y1]
+            kept += change[:, y0:y1]
+            product = scratch_buffer(scratch, "product", kept.shape, kept.dtype)
+            spectrum += np.multiply(kept, self._data_transfer[y0:y1], out=product)
             sweep_bands(spectrum, self._pivots[:, y0:y1], coupling, scratch)
-            np.multiply(spectrum, self.transfer[y0:y1], out=rest[:, y0:y1])
+            hv = np.multiply(spectrum, self.transfer[y0:y1], out=product)
+            if alpha == 1:
+                np.copyto(kept, hv)
+            else:
+                kept *= self.dtype.type(1) - alpha
+                hv *= alpha
+                kept += hv
+            np.copyto(change[:, y0:y1], kept)
 
         map_blocks(block, rows, k * cols * data.itemsize, self.workers)
 
+    def _chunks(self):
+        """The bands in chunks whose spectra fit the cache, as slices."""
+        return (slice(k0, k0 + self.chunk) for k0 in range(0, self.n_bands, self.chunk))
+
     def _rfft2(self, x: np.ndarray, out: np.ndarray) -> None:
-        for k0 in range(0, self.n_bands, self.chunk):
-            out[k0:k0 + self.chunk] = scipy.fft.rfft2(x[k0:k0 + self.chunk], workers=self.workers)
+        for bands in self._chunks():
+            out[bands] = scipy.fft.rfft2(x[bands], workers=self.workers)
 
     def _irfft2(self, spectrum: np.ndarray, out: np.ndarray) -> None:
         """out ← irfft2(spectrum), the spectrum overwritten (the c-step's, spent once transformed back)."""
-        for k0 in range(0, self.n_bands, self.chunk):
-            out[k0:k0 + self.chunk] = irfft2(spectrum[k0:k0 + self.chunk], self.field_shape, self.workers,
-                                             overwrite=True)
+        for bands in self._chunks():
+            out[bands] = irfft2(spectrum[bands], self.field_shape, self.workers, overwrite=True)
+
+    def _irfft2_to_window(self, spectrum: np.ndarray, out: np.ndarray) -> None:
+        """out ← the sensor window of irfft2(spectrum) (pruned), the spectrum overwritten."""
+        for bands in self._chunks():
+            out[bands] = irfft2_to_window(spectrum[bands], self.field_shape, self.sensor_shape, self.workers,
+                                          overwrite=True)
+
+    def _window_rfft2(self, window: np.ndarray, out: np.ndarray) -> None:
+        """out ← rfft2 of ``window`` zero-padded to the field (pruned)."""
+        for bands in self._chunks():
+            out[bands] = rfft2_of_window(window[bands], self.field_shape, self.workers)
+
+    # ---- the data split over the field (tools that read or set the splits as a whole) ------------------------
+    def data_split(self, state: SplitState) -> np.ndarray:
+        """x over the field after the splits: x − ξ from Ŷ and the window's change in ``hv``, plus ξ on the
+        window."""
+        x = irfft2(state.data_spectrum.copy(), self.field_shape, self.workers, overwrite=True).astype(self.dtype)
+        h, w = self.sensor_shape
+        x[:, :h, :w] += state.hv + state.xi
+        return x
+
+    def set_data_split(self, state: SplitState, x: np.ndarray, xi: np.ndarray) -> None:
+        """The data split x over the field and its dual ξ on the window, as the splits leave them: Ŷ = rfft2(x − ξ),
+        nothing left in ``hv``."""
+        h, w = self.sensor_shape
+        state.xi[...] = xi
+        state.x[...] = x[:, :h, :w]
+        y = np.array(x, self.dtype)
+        y[:, :h, :w] -= state.xi
+        self._rfft2(y, state.data_spectrum)
+        state.hv[...] = 0
 
     def convolve(self, v: np.ndarray) -> np.ndarray:
-        """Hv = irfft2(Ĥ·rfft2(v)) (the start's; 2K transforms)."""
+        """Hv = irfft2(Ĥ·rfft2(v)) over the field (2K transforms; the tools' and tests' whole Hv)."""
         return irfft2(scipy.fft.rfft2(v, workers=self.workers) * self.transfer, self.field_shape, self.workers,
                       overwrite=True)

@@ -35,7 +35,10 @@ class Penalties:
 class SplitState:
     """ADMM's arrays: v and Hv (the c-step's; Hv then holds x − ξ), x (the data split, kept for the relaxation),
     ξ on the sensor window, ρ, w (the iterate), η_d and s_d = u_d − η_d per active TV axis, the right-hand side's
-    rest, the two spectra; and the penalties the scaled duals are in (a video's next frame resumes with them)."""
+    rest, the two spectra the c-step works in; and the penalties the scaled duals are in (a video's next frame resumes
+    with them). The host's steps keep the data split on the sensor window (:class:`~.host_steps.Splitting`): x and ξ
+    there, x − ξ over the field as its spectrum ``data_spectrum`` (None on the kernels), and in ``hv`` the window of
+    its relaxed point after the c-step, the window's change to it after the splits."""
 
     v: np.ndarray
     hv: np.ndarray
@@ -48,10 +51,12 @@ class SplitState:
     rest: np.ndarray
     spectra: tuple
     penalties: Penalties | None = None
+    data_spectrum: object = None
 
     def arrays(self) -> list:
-        """Every array of the state but the spectra (what a resumed solve scales into its units)."""
-        return [getattr(self, f.name) for f in fields(self) if f.name not in ("spectra", "penalties")]
+        """Every array of the state but the c-step's spectra (what a resumed solve scales into its units)."""
+        kept = (getattr(self, f.name) for f in fields(self) if f.name not in ("spectra", "penalties"))
+        return [array for array in kept if array is not None]
 
     def moved(self) -> Penalties | None:
         """What of the state a frame whose field was moved under it resumes from (a drifting video's,
