@@ -567,6 +567,33 @@ def test_bench_converged_measures_the_accelerations_and_restores_the_iteration(t
     assert "wrap the host steps" in capsys.readouterr().err
 
 
+def test_fast_admm_measures_its_residual_from_the_point_it_extrapolated(monkeypatch):
+    """The momentum variant's combined residual compares the splits after the iteration with the splits and duals it
+    started from (ẑ, ŷ: the extrapolated point), read before the c-step, which relaxes the host's x − ξ in place."""
+    from clsdcam.algorithms.admm.terms import SplittingBase
+
+    plain, checked, momentum = SplittingBase.iterate, [], admm_acceleration.Momentum(0.999, {"restarts": 0})
+    measured = admm_acceleration.Momentum.combined_residual
+
+    def iterate(split, state):
+        start = admm_acceleration.split_variables(split, state)
+
+        def residual(split_, now, hat):
+            for before, read in zip(start[0] + start[1], hat[0] + hat[1]):
+                assert (before is None and read is None) or np.array_equal(before, read)
+            checked.append(True)
+            return measured(split_, now, hat)
+
+        monkeypatch.setattr(momentum, "combined_residual", residual)
+        return momentum(split, plain, state)
+
+    monkeypatch.setattr(SplittingBase, "iterate", iterate)
+    plan = bench_panel.scene_plan(1, 3, ["piecewise"])[0]
+    bench_converged.timed_solve(bench_panel.panel_scene(plan, (24, 32), 4), {"tv": 1e-3, "iters": 5,
+                                                                              "algorithm": "admm"})
+    assert len(checked) == 5
+
+
 def test_bench_converged_measures_starts_from_fista_and_from_the_answer(tmp_path, capsys, piecewise_panel):
     """``fista_start`` and ``answer_start`` run ADMM from their cubes (other curves than the zero start's) and count
     what the start took; the answer's start, as many ADMM iterations as the reference, ends nearer the reference's

@@ -118,8 +118,8 @@ class Momentum:
         """One iteration: the c-step, the splits (their inputs' residual against the extrapolated point), then the
         next extrapolated point or the restart (``plain_iterate`` is not used: the residual needs the splits' inputs
         in between)."""
+        hat = split_variables(split, state)          # (ẑ, ŷ), before the c-step relaxes the host's x − ξ
         split.c_step(state)
-        hat = split_variables(split, state)          # (ẑ, ŷ): the c-step leaves the splits and duals alone
         result = split.splits(state, split.relaxation)
         residual = self.combined_residual(split, split_variables(split, state), hat)
         current = {n: getattr(state, n).copy() for n in LINEAR_IN_SPLITS}
@@ -198,7 +198,8 @@ def spectral_penalty(penalty: float, first: tuple, second: tuple) -> float:
 
 
 def split_images(split, state) -> list[np.ndarray]:
-    """K v on each split (Hv, D_d v per TV axis, v), after the c-step."""
+    """K v on each split (Hv, D_d v per TV axis, v), after the c-step (Hv by a convolution of v: the host keeps no
+    Hv over the field)."""
     from clsdcam.algorithms.admm.host_steps import difference
 
     tv = np.stack([difference(state.v, axis, np.empty_like(state.v)) for axis in split.axes]) if split.axes else None

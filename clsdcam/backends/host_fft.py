@@ -12,8 +12,9 @@ passes took 1.03× and 0.84× irfft2's time. The forward transform of a whole fi
 
 Pruned (:func:`rfft2_of_window`, :func:`irfft2_to_window`): a field that is zero outside an (H, W) window at the origin
 needs its row pass on the window's H rows only (the rest of each row is zero padding, done by ``n=``); a field of which
-only the window is wanted needs the inverse's row pass on those H rows only. With H, W half the field's, 64 bands at
-256×320 and one thread, they took about 0.8× and 0.7× the whole transforms' time.
+only the window is wanted needs the inverse's row pass on those H rows only. With H, W half the field's, in ADMM's
+solves on one thread, they took 0.84–0.87× and 0.70–0.77× the whole transforms' time at 256×320 (64 bands), 0.60–0.67×
+and 0.78–0.83× at 640×896 (docs/benchmarks.md, "ADMM's data split on the window").
 """
 from __future__ import annotations
 

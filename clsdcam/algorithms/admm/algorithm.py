@@ -168,7 +168,8 @@ class Admm(Algorithm):
             self.reset(self.x)
 
     def transforms(self, problem) -> int:
-        """The c-step's: 2K forward and 2K inverse, every band (after the first iteration built the steps)."""
+        """The c-step's: 2K forward and 2K inverse, every band, pruned ones counted as whole (after the first
+        iteration built the steps)."""
         return self.splitting.transforms
 
     @property

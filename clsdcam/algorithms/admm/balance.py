@@ -25,7 +25,8 @@ and the unscaled duals, does not depend on the penalties):
 * μ₃ → μ₃': ρ ← (μ₃/μ₃')ρ, and the c-step's right-hand side μ₃(w − ρ), which the last w-step left in ``rest``,
   becomes μ₃'(w − ρ') = rest + (μ₃' − μ₃)w;
 * μ₁ → μ₁': ξ ← r·ξ with r = μ₁/μ₁', and the data term's x − ξ, which the last x-step left in ``hv`` on the sensor
-  window, becomes x − ξ' = hv + (1 − r)ξ there.
+  window, becomes x − ξ' = hv + (1 − r)ξ there (on the host ``hv`` holds the window's change to x − ξ, to which the
+  same (1 − r)ξ is added: :mod:`.host_steps`).
 """
 from __future__ import annotations
 

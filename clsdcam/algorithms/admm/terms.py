@@ -33,7 +33,8 @@ class Penalties:
 
 @dataclass
 class SplitState:
-    """ADMM's arrays: v and Hv (the c-step's; Hv then holds x − ξ), x (the data split, kept for the relaxation),
+    """ADMM's arrays: v and Hv (the c-step's; Hv then holds x − ξ), x (the data split, kept for the relaxation;
+    on the host for the data term, its relaxation taken in Ŷ),
     ξ on the sensor window, ρ, w (the iterate), η_d and s_d = u_d − η_d per active TV axis, the right-hand side's
     rest, the two spectra the c-step works in; and the penalties the scaled duals are in (a video's next frame resumes
     with them). The host's steps keep the data split on the sensor window (:class:`~.host_steps.Splitting`): x and ξ
@@ -185,7 +186,8 @@ class SplittingBase:
 
     @property
     def transforms(self) -> int:
-        """2-D FFTs an iteration does: 2K forward and 2K inverse in the c-step, every band (none is skipped)."""
+        """2-D FFTs an iteration does: 2K forward and 2K inverse in the c-step, every band (none is skipped; on the
+        host K of each pruned to the sensor window, counted as whole, as FISTA's are)."""
         return 4 * self.n_bands
 
     def set_penalties(self, penalties: Penalties):
