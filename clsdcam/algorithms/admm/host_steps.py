@@ -164,6 +164,11 @@ class Splitting(SplittingBase):
         return data, (step, norm)
 
     # ---- the passes ----------------------------------------------------------------------------------------
+    def _scalars(self, alpha: float) -> tuple:
+        """α, 1 − α and 2 − α rounded to the cube's precision as the kernels round them."""
+        one, a = self.dtype.type(1), self.dtype.type(alpha)
+        return a, one - a, self.dtype.type(2) - a
+
     def _split_block(self, state: SplitState, y0: int, y1: int, scratch: dict, alpha: float):
         data = self._x_block(state, y0, y1, alpha)
         step, norm = self._w_block(state, y0, y1, scratch, alpha)
@@ -179,13 +184,13 @@ class Splitting(SplittingBase):
             return 0.0
         rows = slice(y0, min(y1, h))
         q, x, xi = state.hv[:, rows], state.x[:, rows], state.xi[:, rows]
-        one, alpha = self.dtype.type(1), self.dtype.type(alpha)
-        data = self._data_term((q - (one - alpha) * (x - xi)) / alpha, rows)
-        q += (one + one - alpha) * xi
+        alpha, one_minus, two_minus = self._scalars(alpha)
+        data = self._data_term((q - one_minus * (x - xi)) / alpha, rows)
+        q += two_minus * xi
         misfit = self.b[rows] - np.einsum("khw,khw->hw", self.filters[:, rows], q)
         stepped = np.multiply(self._gain[:, rows], -misfit)
         np.subtract(q, stepped, out=x)
-        np.multiply(xi, one + one - alpha, out=q)
+        np.multiply(xi, two_minus, out=q)
         q -= 2 * stepped
         xi[...] = stepped
         return data
@@ -264,7 +269,7 @@ class Splitting(SplittingBase):
         a copy of it (for the transform to the window, which spends it); on row blocks of the spectra."""
         k, rows, cols = data.shape
         coupling = self.dtype.type(self.coupling)
-        alpha = self.dtype.type(self.relaxation)
+        alpha, one_minus, _ = self._scalars(self.relaxation)
 
         def block(y0, y1, scratch):
             spectrum, kept = rest[:, y0:y1], data[:, y0:y1]
@@ -276,7 +281,7 @@ class Splitting(SplittingBase):
             if alpha == 1:
                 np.copyto(kept, hv)
             else:
-                kept *= self.dtype.type(1) - alpha
+                kept *= one_minus
                 hv *= alpha
                 kept += hv
             np.copyto(change[:, y0:y1], kept)

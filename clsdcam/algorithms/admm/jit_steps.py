@@ -197,11 +197,6 @@ def band_pass(data, change, rest, data_transfer, transfer, pivots, coupling, alp
 class JitSplitting(Splitting):
     """:class:`~.host_steps.Splitting` with its passes on each row block compiled (the module docstring)."""
 
-    def _scalars(self, alpha: float) -> tuple:
-        """α, 1 − α and 2 − α rounded to the cube's precision as the kernels round them."""
-        one, a = self.dtype.type(1), self.dtype.type(alpha)
-        return a, one - a, self.dtype.type(2) - a
-
     def _split_block(self, state: SplitState, y0: int, y1: int, scratch: dict, alpha: float):
         a, one_minus, two_minus = self._scalars(alpha)
         real = self.dtype.type
@@ -216,10 +211,10 @@ class JitSplitting(Splitting):
         return data, step, norm
 
     def _band_solve(self, data: np.ndarray, change: np.ndarray, rest: np.ndarray) -> None:
-        real, (k, rows, cols) = self.dtype.type, data.shape
-        coupling, alpha = real(self.coupling), real(self.relaxation)
+        (k, rows, cols), coupling = data.shape, self.dtype.type(self.coupling)
+        alpha, one_minus, _ = self._scalars(self.relaxation)
         map_blocks(lambda y0, y1, scratch: band_pass(data, change, rest, self._data_transfer, self.transfer,
-                                                     self._pivots, coupling, alpha, real(1) - alpha, y0, y1),
+                                                     self._pivots, coupling, alpha, one_minus, y0, y1),
                    rows, k * cols * data.itemsize, self.workers)
 
     def _adjoint_block(self, state: SplitState, y0: int, y1: int, scratch: dict) -> None:
