@@ -10,6 +10,7 @@ from conftest import opencl_device
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import admm_acceleration  # noqa: E402
 import admm_duals  # noqa: E402
+import admm_masked  # noqa: E402
 import bench_accuracy  # noqa: E402
 import bench_admm  # noqa: E402
 import bench_admm_passes  # noqa: E402
@@ -19,6 +20,7 @@ import bench_converged  # noqa: E402
 import bench_iteration  # noqa: E402
 import bench_panel  # noqa: E402
 import bench_recon  # noqa: E402
+import bench_road  # noqa: E402
 import bench_stop  # noqa: E402
 import compare_recon  # noqa: E402
 import compare_speed  # noqa: E402
@@ -525,6 +527,48 @@ def test_the_fixed_point_data_dual_is_the_one_admm_converges_to(monkeypatch):
     assert late < 0.1 and late < early / 10
 
 
+def test_the_masked_c_step_solves_the_system_with_the_unobserved_split_eliminated(monkeypatch):
+    """The masked system's A, in Fourier, is μ₁HᵀMH + Σ_d μ₂,dD_dᵀD_d + μ₃I built in real space from the host steps'
+    own convolution and differences (M the sensor window); P⁻¹ inverts its unmasked part; enough conjugate-gradient
+    steps solve A·δ = r; the variant changes ADMM's road, which leads to the same problem's answer as ADMM's as built
+    (6 % from its 3000th iterate after 600, as ADMM as built is), and its c-step is put back after it."""
+    from clsdcam.algorithms.admm.host_steps import Splitting, difference, difference_adjoint_add
+    from clsdcam.algorithms.admm.terms import SplittingBase
+
+    plain, last = SplittingBase.iterate, {}
+
+    def iterate(split, state):
+        last["split"] = split
+        return plain(split, state)
+
+    monkeypatch.setattr(SplittingBase, "iterate", iterate)
+    plan = bench_panel.scene_plan(1, 3, ["piecewise"])[0]
+    sim = bench_panel.panel_scene(plan, (24, 32), 4)
+    answer, _ = bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 3000, "algorithm": "admm"})
+    split = last["split"]
+    system = admm_masked.MaskedSystem(split)
+    (h, w), p = split.sensor_shape, split.penalties
+    v = np.random.default_rng(4).random(split.shape)
+    hv = split.convolve(v)
+    hv[:, h:], hv[:, :h, w:] = 0, 0
+    direct = p.data * np.fft.irfft2(np.fft.rfft2(hv) * np.conj(split.transfer), s=split.field_shape) + p.nonneg * v
+    for axis in split.axes:
+        difference_adjoint_add(difference(v, axis, np.empty_like(v)), axis, p.tv_along(axis), direct)
+    spectrum = np.fft.rfft2(v)
+    assert np.abs(system.apply(spectrum) - np.fft.rfft2(direct)).max() < 1e-5 * np.abs(np.fft.rfft2(direct)).max()
+    unmasked = system.apply(spectrum) + system.pulled(np.fft.irfft2(system.transfer * spectrum, s=split.field_shape))
+    assert np.abs(system.precondition(unmasked) - spectrum).max() < 1e-9 * np.abs(spectrum).max()
+    r = np.fft.rfft2(np.random.default_rng(5).random(split.shape))
+    assert np.abs(system.apply(system.correction(r, 200)) - r).max() < 1e-8 * np.abs(r).max()
+
+    built, _ = bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 50, "algorithm": "admm"})
+    with admm_masked.masked_c_steps({"masked": 3}):
+        early, _ = bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 50, "algorithm": "admm"})
+        masked, _ = bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 600, "algorithm": "admm"})
+    assert Splitting.c_step.__name__ == "c_step" and not np.allclose(early.cube, built.cube, rtol=1e-3, atol=1e-4)
+    assert np.linalg.norm(masked.cube - answer.cube) < 0.06 * np.linalg.norm(answer.cube)
+
+
 def test_bench_converged_measures_the_duals_variants_and_restores_the_solver(tmp_path, piecewise_panel):
     """``duals`` on a start, ``refresh`` and ``rebalance`` run, each counted once; a second balance sets other β_d
     than the one balance; the host start and ADMM's iteration are as before after; on OpenCL they are refused."""
@@ -636,6 +680,34 @@ def test_bench_stop_traces_the_true_distance_and_both_estimates(tmp_path, capsys
     assert bench_stop.settled(flags, ref)["iteration"] == 15
     assert bench_stop.stop(flags, "steps", 0.5) == {**flags[1], "stays_within": False}
     assert "| 0 | piecewise, standard |" in capsys.readouterr().out and (tmp_path / "stop.png").stat().st_size > 0
+
+
+def test_bench_road_splits_the_road_left_into_orthogonal_parts(tmp_path, capsys, piecewise_panel):
+    """A difference made of one part is all that part's; the parts of any difference add up to it; an iterate on the
+    answer's own road (x* plus a multiple of its error) has a cosine of 1 with it; a mark as long as the reference
+    is the answer (distance 0, no road to share out); the shares of a mark short of it add up to 1; the light in its
+    window is the answer's, and the margin holds some."""
+    rng = np.random.default_rng(0)
+    truth = rng.random((4, 64, 64)) + 1
+    flat = np.broadcast_to(np.ones((64, 64)), truth.shape)
+    spectra = np.broadcast_to(np.array([1.0, -1.0, 2.0, -2.0])[:, None, None], truth.shape) * rng.random((64, 64))
+    for e, part in ((0.1 * flat, "smooth achromatic"), (0.1 * spectra, "chromatic")):
+        assert bench_road.anatomy(truth + 0.2 + e, truth + 0.2, truth)["energy"][part] == pytest.approx(1)
+    e = rng.random(truth.shape)
+    assert sum(bench_road.parts(e).values()) == pytest.approx(e)
+    road = bench_road.anatomy(truth + 0.3 * flat, truth + 0.2 * flat, truth)
+    assert road["cosine"] == pytest.approx(1) and road["gap"]["smooth achromatic"] == pytest.approx(1)
+    assert road["psnr_gap"] == pytest.approx(psnr(truth + 0.2 * flat, truth) - psnr(truth + 0.3 * flat, truth))
+    bench_road.main([*ONE_PIECEWISE_SCENE, "--reference-iters", "200", "--marks", "40,200",
+                     "--cache", str(tmp_path / "cache"), "--out", str(tmp_path)])
+    scene = json.loads((tmp_path / "road.json").read_text())["scenes"][0]
+    first, last = scene["marks"]
+    assert first["distance"] > 0.01 and last["distance"] == 0.0 and last["psnr_gap"] == 0.0
+    assert all(np.isnan(share) for share in last["energy"].values()) and np.isnan(last["cosine"])
+    assert sum(first["energy"].values()) == pytest.approx(1) and sum(first["gap"].values()) == pytest.approx(1)
+    assert sum(last["light"].values()) > last["light"]["window"] > 0
+    assert scene["answer_light"] == pytest.approx(last["light"]["window"], rel=1e-5)
+    assert "| 0 | piecewise, standard | 40 |" in capsys.readouterr().out
 
 
 def test_bench_answer_replays_the_default_stop_where_the_default_stops(tmp_path, capsys, monkeypatch):

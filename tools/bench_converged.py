@@ -47,6 +47,8 @@ iterations' (the model's own answer: the bound on any start of the primal alone,
 "start" is what making it took, in the variant's own iterations' time. ``duals=1`` (ξ) or ``2`` (every dual) sets
 the start's duals at their fixed-point values for its cube, ``refresh=N`` sets them so from the iterate at
 iteration N, ``rebalance=N`` balances the TV penalties again there (:mod:`admm_duals`; "restarts" counts them).
+``masked=N`` takes N conjugate-gradient steps a c-step towards the masked system, the data split's unobserved part
+eliminated (:mod:`admm_masked`).
 """
 from __future__ import annotations
 
@@ -61,6 +63,7 @@ import numpy as np
 
 from admm_acceleration import ACCELERATIONS, accelerated
 from admm_duals import DUAL_VARIANTS, dual_variants
+from admm_masked import MASKED_VARIANTS, masked_c_steps
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text, timed_run
 from bench_panel import (add_kinds_option, chosen_scenes, panel_scene, scene_indices, progress, scene_done,
                          scene_name)
@@ -219,7 +222,7 @@ ADMM_CONSTANTS = {"data": ("algorithm", "DATA"), "tv": ("algorithm", "TV"), "non
                   "alpha": ("algorithm", "RELAXATION"), "balance_at": ("algorithm", "BALANCE_AT"),
                   "balance": ("balance", "THRESHOLD_OVER_RMS"), "few_balance": ("balance", "THRESHOLD_FEW_POINTS")}
 STARTS = {"fista_start": "fista", "answer_start": "admm"}   # a start's name -> the algorithm that makes its cube
-VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS, *STARTS, *DUAL_VARIANTS)   # and admm_duals' names
+VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS, *STARTS, *DUAL_VARIANTS, *MASKED_VARIANTS)
 
 
 def parse_variants(text: str) -> list[dict]:
@@ -272,7 +275,7 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
         x0, start_seconds = variant_start(sim, tau, variant)
         told = {} if any(name in variant for name in ACCELERATIONS) else probe
         with admm_constants(variant), accelerated(variant) as events, dual_variants(variant, events), \
-                told_point_like(**told):
+                masked_c_steps(variant), told_point_like(**told):
             result, seconds = timed_solve(sim, {"tv": tau, "iters": args.variant_iters, "algorithm": "admm"},
                                           range(10, args.variant_iters + 1, 10), x0)
         run = {"points": curve(sim, result), "change": [r["change"] for r in result.history]}
@@ -501,8 +504,9 @@ def main(argv=None) -> int:
             Settings(converge=args.converge)          # the package's own rule for --converge
         except InputError as error:
             parser.error(str(error))
-    if args.backend != "numpy" and any(set(v) & {*ACCELERATIONS, *DUAL_VARIANTS} for v in args.variants):
-        parser.error("--variants momentum/anderson/spectral/duals/refresh/rebalance wrap the host steps: "
+    host_only = {*ACCELERATIONS, *DUAL_VARIANTS, *MASKED_VARIANTS}
+    if args.backend != "numpy" and any(set(v) & host_only for v in args.variants):
+        parser.error("--variants momentum/anderson/spectral/duals/refresh/rebalance/masked wrap the host steps: "
                      "--backend numpy")
     if args.against and args.variants:
         parser.error("--against re-times the default and today: no --variants")

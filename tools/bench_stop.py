@@ -91,12 +91,18 @@ def stop(marks: list[dict], name: str, tolerance: float) -> dict | None:
     return None
 
 
-def run_scene(plan: dict, args, cache: Path) -> dict:
+def scene_answer(plan: dict, args, cache: Path) -> tuple:
+    """A panel scene at its weight: (its simulation, τ, what the default's probe read, the reference, x* = the ADMM
+    reference's final cube), the references run where ``cache`` lacks them."""
     sim = panel_scene(plan, args.size, args.bands)
     tau, probe = scene_weight(sim, args.weight_from)
     ref = reference({a: reference_run(sim, plan, tau, a, args.reference_iters, cache)
                      for a in REFERENCE_ALGORITHMS})
-    xstar = reference_cube(sim, plan, tau, "admm", args.reference_iters, cache)
+    return sim, tau, probe, ref, reference_cube(sim, plan, tau, "admm", args.reference_iters, cache)
+
+
+def run_scene(plan: dict, args, cache: Path) -> dict:
+    sim, tau, probe, ref, xstar = scene_answer(plan, args, cache)
     with told_point_like(**probe):
         marks = traced_run(sim, tau, args.iters, args.every, xstar, ref)
     return {**plan, "tv": tau, "reference": ref, "error": relative(sim.truth, xstar), "marks": marks,

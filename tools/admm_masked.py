@@ -1,0 +1,132 @@
+"""ADMM's c-step with the data split's unobserved part eliminated: measured as ``bench_converged --variants`` (name
+``masked``, the conjugate-gradient steps a c-step takes) and not built into the solver (docs/convergence.md, "Where
+the road left lies", has the numbers).
+
+ADMM splits x = Hv over the whole field, so that its c-step is diagonal in Fourier (Almeida and Figueiredo 2013's
+masked deconvolution). Outside the sensor window no data bind x: the x-step leaves x = Hv + ξ with ξ = 0 there, and
+the next c-step's μ₁/2‖Hv − (x − ξ)‖² over that region pulls Hv back towards its last value, an inertia on light
+that the PSF spreads nearly alike from the window and the field's margin. Minimised over x outside the window as well
+as over v, that term vanishes, and the c-step becomes the masked system (M the window)
+
+    A v = (μ₁HᵀMH + μ₂ΣD_dᵀD_d + μ₃I) v = μ₁HᵀM(x − ξ) + rest,   A = P − μ₁Hᵀ(I − M)H,
+
+where P = μ₁HᵀH + μ₂ΣD_dᵀD_d + μ₃I is today's c-step matrix, solved exactly in Fourier (:mod:`clsdcam.algorithms.
+admm.terms`). The variant starts from today's c-step, v₀ = P⁻¹(μ₁Hᵀ(x − ξ) + rest) with x − ξ over the field, whose
+residual in the masked system is r₀ = μ₁Hᵀ(I − M)(Hv₀ − (x − ξ)), and takes N steps of conjugate gradients
+preconditioned by P⁻¹, in Fourier (half spectra, their inner products weighted for the columns they stand for). The
+correction δ then goes to v and, relaxed, to the data split's x − ξ (Ŷ += αĤδ̂ and its window). The fixed point is
+the same problem's minimiser. Each step costs 2K transforms over the field, the start 3K and the correction 2K more:
+a variant's times measure this script, not what a built c-step would cost. Host steps only (``--backend numpy``).
+"""
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import astuple
+
+import numpy as np
+import scipy.fft
+
+MASKED_VARIANTS = ("masked",)
+
+
+class MaskedSystem:
+    """A and P⁻¹ of one splitting's penalties, in Fourier over the field's half spectrum (float64)."""
+
+    def __init__(self, split):
+        from clsdcam.algorithms.admm.terms import band_degrees, band_pivots, difference_spectrum
+
+        p, (hp, wp), self.window = split.penalties, split.field_shape, split.sensor_shape
+        self.transfer, self.data = split.transfer.astype(np.complex128), p.data
+        diagonal = p.data * np.abs(self.transfer) ** 2 + p.nonneg
+        if 1 in split.axes:
+            diagonal = diagonal + p.tv_along(1) * difference_spectrum(hp)[:, None]
+        if 2 in split.axes:
+            diagonal = diagonal + p.tv_along(2) * difference_spectrum(wp, half=True)[None, :]
+        self.diagonal, self.coupling = diagonal, (p.tv_along(0) if 0 in split.axes else 0.0)
+        self.degrees = band_degrees(split.n_bands)[:, None, None]
+        self.pivots = band_pivots(diagonal, self.coupling, split.n_bands)
+        self.shape = (hp, wp)
+        self.weights = np.full(wp // 2 + 1, 2.0)
+        self.weights[0] = 1.0
+        if wp % 2 == 0:
+            self.weights[-1] = 1.0
+
+    def dot(self, a: np.ndarray, b: np.ndarray) -> float:
+        """⟨a, b⟩ of the real fields whose half spectra a and b are (up to the transform's constant)."""
+        return float(np.sum(self.weights * np.real(np.conj(a) * b)))
+
+    def outside(self, field: np.ndarray) -> np.ndarray:
+        """(I − M)·field: ``field`` with its sensor window set to 0 (in place)."""
+        h, w = self.window
+        field[:, :h, :w] = 0
+        return field
+
+    def pulled(self, field: np.ndarray) -> np.ndarray:
+        """μ₁Hᵀ(I − M)·field, in Fourier (``field`` is spent)."""
+        return self.data * np.conj(self.transfer) * scipy.fft.rfft2(self.outside(field))
+
+    def apply(self, v: np.ndarray) -> np.ndarray:
+        """A·v̂ = P·v̂ − μ₁Hᵀ(I − M)H·v̂."""
+        e = self.coupling
+        out = (self.diagonal + e * self.degrees) * v
+        out[1:] -= e * v[:-1]
+        out[:-1] -= e * v[1:]
+        return out - self.pulled(scipy.fft.irfft2(self.transfer * v, s=self.shape))
+
+    def precondition(self, r: np.ndarray) -> np.ndarray:
+        """P⁻¹·r̂ by Thomas's sweeps along λ (:func:`clsdcam.algorithms.admm.terms.band_pivots`)."""
+        e, m, g = self.coupling, self.pivots, np.empty_like(r)
+        g[0] = r[0] * m[0]
+        for j in range(1, len(r)):
+            g[j] = (r[j] + e * g[j - 1]) * m[j]
+        for j in range(len(r) - 2, -1, -1):
+            g[j] += e * m[j] * g[j + 1]
+        return g
+
+    def correction(self, r: np.ndarray, steps: int) -> np.ndarray:
+        """δ̂ after ``steps`` of P⁻¹-preconditioned conjugate gradients on A·δ̂ = r̂ from 0."""
+        delta, z = np.zeros_like(r), self.precondition(r)
+        p, rz = z.copy(), self.dot(r, z)
+        for _ in range(steps):
+            ap = self.apply(p)
+            step = rz / self.dot(p, ap)
+            delta += step * p
+            r = r - step * ap
+            z = self.precondition(r)
+            rz, last = self.dot(r, z), rz
+            p = z + (rz / last) * p
+        return delta
+
+
+def masked_c_step(split, state, steps: int, plain) -> None:
+    """Today's c-step (``plain``), then ``steps`` conjugate-gradient steps towards the masked system's solution
+    (the module docstring)."""
+    key = (astuple(split.penalties), tuple(split.axes))
+    if getattr(split, "_masked", (None,))[0] != key:
+        split._masked = (key, MaskedSystem(split))
+    system = split._masked[1]
+    unobserved_data = system.outside(scipy.fft.irfft2(state.data_spectrum, s=system.shape))   # x − ξ off the window
+    plain(split, state)
+    hv = scipy.fft.irfft2(system.transfer * scipy.fft.rfft2(state.v.astype(np.float64)), s=system.shape)
+    delta = system.correction(system.pulled(hv - unobserved_data), steps)
+    h, w = system.window
+    state.v += scipy.fft.irfft2(delta, s=system.shape).astype(state.v.dtype)
+    moved = split.relaxation * system.transfer * delta
+    state.data_spectrum += moved.astype(state.data_spectrum.dtype)
+    state.hv += scipy.fft.irfft2(moved, s=system.shape)[:, :h, :w].astype(state.hv.dtype)
+
+
+@contextmanager
+def masked_c_steps(variant: dict):
+    """While it lasts, ADMM's host c-step is :func:`masked_c_step` with ``variant["masked"]`` steps (as built where the
+    variant does not name it); restored after."""
+    from clsdcam.algorithms.admm.host_steps import Splitting
+
+    plain = Splitting.c_step
+    steps = int(variant.get("masked", 0))
+    if steps:
+        Splitting.c_step = lambda split, state: masked_c_step(split, state, steps, plain)
+    try:
+        yield
+    finally:
+        Splitting.c_step = plain
