@@ -15,7 +15,7 @@ admm.terms`). The variant starts from today's c-step, v₀ = P⁻¹(μ₁Hᵀ(x 
 residual in the masked system is r₀ = μ₁Hᵀ(I − M)(Hv₀ − (x − ξ)), and takes N steps of conjugate gradients
 preconditioned by P⁻¹, in Fourier (half spectra, their inner products weighted for the columns they stand for). The
 correction δ then goes to v and, relaxed, to the data split's x − ξ (Ŷ += αĤδ̂ and its window). The fixed point is
-the same problem's minimiser. Each step costs 2K transforms over the field, the start 3K and the correction 2K more:
+the same problem's minimiser. Each step costs 2K transforms over the field, the start 4K and the correction 2K more:
 a variant's times measure this script, not what a built c-step would cost. Host steps only (``--backend numpy``).
 """
 from __future__ import annotations

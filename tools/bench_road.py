@@ -54,7 +54,7 @@ def anatomy(x: np.ndarray, xstar: np.ndarray, truth: np.ndarray) -> dict:
     cosine of the smooth achromatic parts of e and x* − t."""
     x, xstar, truth = (np.asarray(a, np.float64) for a in (x, xstar, truth))
     e_parts, error_parts = parts(x - xstar), parts(xstar - truth)
-    energy = sum(float(np.sum(p ** 2)) for p in e_parts.values())
+    energy = float(np.sum((x - xstar) ** 2))
     excess = float(np.sum((x - truth) ** 2) - np.sum((xstar - truth) ** 2))
     smooth, answer = e_parts["smooth achromatic"][0].ravel(), error_parts["smooth achromatic"][0].ravel()
     return {"distance": float(np.sqrt(energy) / np.linalg.norm(xstar)),
@@ -77,7 +77,7 @@ def mark(sim, tau: float, iters: int, xstar: np.ndarray) -> dict:
     result, _ = timed_run(sim.calibration, sim.measurement,
                           {"tv": tau, "iters": iters, "algorithm": "admm", "full_field": True})
     field = result.full_field
-    geometry = result.attrs["window_offset"], sim.truth.shape[1:]
+    geometry = result.attrs["window_offset"], result.cube.shape[1:]
     return {"iteration": iters, **anatomy(result.cube, xstar, sim.truth), "light": light(field, *geometry)}
 
 
