@@ -543,11 +543,12 @@ def masked_operator(split, v: np.ndarray) -> np.ndarray:
 
 def test_the_masked_c_step_solves_the_system_with_the_unobserved_split_eliminated(monkeypatch):
     """The masked system's A, in Fourier, is :func:`masked_operator`; P⁻¹ inverts its unmasked part; the half spectra's
-    inner product is the fields' (even and odd widths); enough conjugate-gradient steps solve A·δ = r. On the state
-    after 50 iterations, the masked c-step's v solves the masked system for the right-hand side the splits left (to
-    10⁻⁵, where the plain c-step's is 7·10⁻³ from it), and it leaves Ŷ = αĤv̂ + (1 − α)·rfft2(x − ξ) with ``hv`` its
-    window, as the plain c-step does for its v. The variant changes ADMM's road, which leads to the same problem's
-    answer (6 % from ADMM's 3000th iterate after 600, as ADMM as built is), and its c-step is put back after it."""
+    inner product is the fields'; a coarser grid that is not even is refused, and a coarse spectrum widened to the
+    field's and cut back is itself; enough conjugate-gradient steps solve A·δ = r. On the state after 50 iterations,
+    the masked c-step's v solves the masked system for the right-hand side the splits left (to 10⁻⁵, where the plain
+    c-step's is 7·10⁻³ from it), and it leaves Ŷ = αĤv̂ + (1 − α)·rfft2(x − ξ) with ``hv`` its window, as the plain
+    c-step does for its v. The variant changes ADMM's road, which leads to the same problem's answer (6 % from ADMM's
+    3000th iterate after 600, as ADMM as built is), and its c-step is put back after it."""
     import copy
     from types import SimpleNamespace
 
@@ -573,12 +574,16 @@ def test_the_masked_c_step_solves_the_system_with_the_unobserved_split_eliminate
     assert np.abs(system.precondition(unmasked) - spectrum).max() < 1e-9 * np.abs(spectrum).max()
     r = np.fft.rfft2(rng.random(split.shape))
     assert np.abs(system.apply(system.correction(r, 200)) - r).max() < 1e-8 * np.abs(r).max()
-    for width in (10, 9):
-        odd = SimpleNamespace(penalties=split.penalties, field_shape=(6, width), sensor_shape=(3, 4), axes=split.axes,
-                              n_bands=2, transfer=np.ones((6, width // 2 + 1), np.complex64))
-        a, b = rng.random((2, 2, 6, width))
-        inner = admm_masked.MaskedSystem(odd).dot(np.fft.rfft2(a), np.fft.rfft2(b))
-        assert inner == pytest.approx(6 * width * np.sum(a * b))
+    small = SimpleNamespace(penalties=split.penalties, field_shape=(8, 12), sensor_shape=(4, 6), axes=split.axes,
+                            n_bands=2, transfer=np.ones((8, 7), np.complex64))
+    a, b = rng.random((2, 2, 8, 12))
+    inner = admm_masked.MaskedSystem(small).dot(np.fft.rfft2(a), np.fft.rfft2(b))
+    assert inner == pytest.approx(8 * 12 * np.sum(a * b))
+    with pytest.raises(ValueError, match="no even grid"):
+        admm_masked.MaskedSystem(small, 3)
+    coarse = admm_masked.MaskedSystem(split, 2)
+    low = np.fft.rfft2(rng.random(coarse.shape))
+    assert np.allclose(admm_masked.low_band(admm_masked.widened(low, split.field_shape), coarse.shape), low)
 
     built, _ = bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 50, "algorithm": "admm"})
     state, (h, w), alpha = copy.deepcopy(last["state"]), split.sensor_shape, split.relaxation   # after 50 iterations

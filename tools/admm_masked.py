@@ -1,6 +1,6 @@
-"""ADMM's c-step with the data split's unobserved part eliminated: measured as ``bench_converged --variants`` (name
-``masked``, the conjugate-gradient steps a c-step takes) and not built into the solver (docs/convergence.md, "Where
-the road left lies", has the numbers).
+"""ADMM's c-step with the data split's unobserved part eliminated: measured as ``bench_converged --variants`` (names
+``masked``, the conjugate-gradient steps a c-step takes, and ``coarse``, the grid they are taken on) and not built
+into the solver (docs/convergence.md, "Where the road left lies", has the numbers).
 
 ADMM splits x = Hv over the whole field, so that its c-step is diagonal in Fourier (Almeida and Figueiredo 2013's
 masked deconvolution). Outside the sensor window no data bind x: the x-step leaves x = Hv + ξ with ξ = 0 there, and
@@ -16,7 +16,11 @@ residual in the masked system is r₀ = μ₁Hᵀ(I − M)(Hv₀ − (x − ξ))
 preconditioned by P⁻¹, in Fourier (half spectra, their inner products weighted for the columns they stand for). The
 correction δ then goes to v and, relaxed, to the data split's x − ξ (Ŷ += αĤδ̂ and its window). The fixed point is
 the same problem's minimiser. Each step costs 2K transforms over the field, the start 4K and the correction 2K more:
-a variant's times measure this script, not what a built c-step would cost. Host steps only (``--backend numpy``).
+a variant's times measure this script, not what a built c-step would cost. ``coarse=f`` takes the steps on a grid f
+times coarser along y and x instead: the residual's lowest frequencies (Hv₀ − (x − ξ) in Fourier, where a built
+c-step has both), A and P⁻¹ there with the field's own Fourier values, the window's coarse pixels as the mask, and the
+correction zero-padded back; what moves slowly is smooth light (docs/convergence.md), and a step there costs 2K
+transforms f² times smaller. Host steps only (``--backend numpy``).
 """
 from __future__ import annotations
 
@@ -26,30 +30,51 @@ from dataclasses import astuple
 import numpy as np
 import scipy.fft
 
-MASKED_VARIANTS = ("masked",)
+MASKED_VARIANTS = ("masked", "coarse")
+
+
+def low_band(spectrum: np.ndarray, shape) -> np.ndarray:
+    """The lowest frequencies of a half spectrum (…, Hp, Wp//2 + 1): those of an (h, w) grid's, h even."""
+    h, w = shape
+    top, columns = spectrum.shape[-2] - h // 2, slice(0, w // 2 + 1)
+    return np.concatenate([spectrum[..., :h // 2, columns], spectrum[..., top:, columns]], axis=-2)
+
+
+def widened(spectrum: np.ndarray, shape) -> np.ndarray:
+    """A coarse grid's half spectrum zero-padded to the (Hp, Wp) field's (the inverse of :func:`low_band`)."""
+    (hp, wp), h = shape, spectrum.shape[-2]
+    out = np.zeros(spectrum.shape[:-2] + (hp, wp // 2 + 1), spectrum.dtype)
+    out[..., :h // 2, :spectrum.shape[-1]] = spectrum[..., :h // 2, :]
+    out[..., hp - h // 2:, :spectrum.shape[-1]] = spectrum[..., h // 2:, :]
+    return out
 
 
 class MaskedSystem:
-    """A and P⁻¹ of one splitting's penalties, in Fourier over the field's half spectrum (float64)."""
+    """A and P⁻¹ of one splitting's penalties, in Fourier over the half spectrum (float64) of the field, or with
+    ``factor`` f > 1 of a grid f times coarser along y and x: the field's lowest frequencies, where A and P keep the
+    field's own values (the mask then the window's coarse pixels)."""
 
-    def __init__(self, split):
+    def __init__(self, split, factor: int = 1):
         from clsdcam.algorithms.admm.terms import band_degrees, band_pivots, difference_spectrum
 
-        p, (hp, wp), self.window = split.penalties, split.field_shape, split.sensor_shape
-        self.transfer, self.data = split.transfer.astype(np.complex128), p.data
-        diagonal = p.data * np.abs(self.transfer) ** 2 + p.nonneg
+        p, (hp, wp), (h, w) = split.penalties, split.field_shape, split.sensor_shape
+        if hp % (2 * factor) or wp % (2 * factor):
+            raise ValueError(f"a field of {hp}×{wp} has no even grid {factor} times coarser")
+        self.factor, self.field_shape = factor, (hp, wp)
+        self.shape, self.window = (hp // factor, wp // factor), (h // factor, w // factor)
+        transfer = split.transfer.astype(np.complex128)
+        diagonal = p.data * np.abs(transfer) ** 2 + p.nonneg
         if 1 in split.axes:
             diagonal = diagonal + p.tv_along(1) * difference_spectrum(hp)[:, None]
         if 2 in split.axes:
             diagonal = diagonal + p.tv_along(2) * difference_spectrum(wp, half=True)[None, :]
-        self.diagonal, self.coupling = diagonal, (p.tv_along(0) if 0 in split.axes else 0.0)
+        self.full_transfer, self.data = transfer, p.data
+        self.transfer, self.diagonal = low_band(transfer, self.shape), low_band(diagonal, self.shape)
+        self.coupling = p.tv_along(0) if 0 in split.axes else 0.0
         self.degrees = band_degrees(split.n_bands)[:, None, None]
-        self.pivots = band_pivots(diagonal, self.coupling, split.n_bands)
-        self.shape = (hp, wp)
-        self.weights = np.full(wp // 2 + 1, 2.0)
-        self.weights[0] = 1.0
-        if wp % 2 == 0:
-            self.weights[-1] = 1.0
+        self.pivots = band_pivots(self.diagonal, self.coupling, split.n_bands)
+        self.weights = np.full(self.shape[1] // 2 + 1, 2.0)
+        self.weights[0] = self.weights[-1] = 1.0
 
     def dot(self, a: np.ndarray, b: np.ndarray) -> float:
         """⟨a, b⟩ of the real fields whose half spectra a and b are (up to the transform's constant)."""
@@ -98,34 +123,36 @@ class MaskedSystem:
         return delta
 
 
-def masked_c_step(split, state, steps: int, plain) -> None:
+def masked_c_step(split, state, steps: int, plain, factor: int = 1) -> None:
     """Today's c-step (``plain``), then ``steps`` conjugate-gradient steps towards the masked system's solution
-    (the module docstring)."""
-    key = (astuple(split.penalties), tuple(split.axes))
+    (the module docstring), on a grid ``factor`` times coarser than the field (the residual's lowest frequencies in,
+    the correction zero-padded out)."""
+    key = (astuple(split.penalties), tuple(split.axes), factor)
     if getattr(split, "_masked", (None,))[0] != key:
-        split._masked = (key, MaskedSystem(split))
-    system = split._masked[1]
-    unobserved_data = system.outside(scipy.fft.irfft2(state.data_spectrum, s=system.shape))   # x − ξ off the window
+        split._masked = (key, MaskedSystem(split, factor))
+    system, f = split._masked[1], split._masked[1].factor
+    data = state.data_spectrum.astype(np.complex128)                      # x − ξ (its window's change still in hv)
     plain(split, state)
-    hv = scipy.fft.irfft2(system.transfer * scipy.fft.rfft2(state.v.astype(np.float64)), s=system.shape)
-    delta = system.correction(system.pulled(hv - unobserved_data), steps)
-    h, w = system.window
-    state.v += scipy.fft.irfft2(delta, s=system.shape).astype(state.v.dtype)
-    moved = split.relaxation * system.transfer * delta
+    apart = system.full_transfer * scipy.fft.rfft2(state.v.astype(np.float64)) - data      # Hv₀ − (x − ξ)
+    field = scipy.fft.irfft2(low_band(apart, system.shape) / f ** 2, s=system.shape)
+    delta = widened(system.correction(system.pulled(field), steps), system.field_shape) * f ** 2
+    h, w = split.sensor_shape
+    state.v += scipy.fft.irfft2(delta, s=system.field_shape).astype(state.v.dtype)
+    moved = split.relaxation * system.full_transfer * delta
     state.data_spectrum += moved.astype(state.data_spectrum.dtype)
-    state.hv += scipy.fft.irfft2(moved, s=system.shape)[:, :h, :w].astype(state.hv.dtype)
+    state.hv += scipy.fft.irfft2(moved, s=system.field_shape)[:, :h, :w].astype(state.hv.dtype)
 
 
 @contextmanager
 def masked_c_steps(variant: dict):
-    """While it lasts, ADMM's host c-step is :func:`masked_c_step` with ``variant["masked"]`` steps (as built where the
-    variant does not name it); restored after."""
+    """While it lasts, ADMM's host c-step is :func:`masked_c_step` with ``variant["masked"]`` steps on a grid
+    ``variant["coarse"]`` times coarser (1: the field's; as built where the variant names no steps); restored after."""
     from clsdcam.algorithms.admm.host_steps import Splitting
 
     plain = Splitting.c_step
-    steps = int(variant.get("masked", 0))
+    steps, factor = int(variant.get("masked", 0)), int(variant.get("coarse", 1))
     if steps:
-        Splitting.c_step = lambda split, state: masked_c_step(split, state, steps, plain)
+        Splitting.c_step = lambda split, state: masked_c_step(split, state, steps, plain, factor)
     try:
         yield
     finally:
