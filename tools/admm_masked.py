@@ -55,7 +55,7 @@ class MaskedSystem:
     field's own values (the mask then the window's coarse pixels)."""
 
     def __init__(self, split, factor: int = 1):
-        from clsdcam.algorithms.admm.terms import band_degrees, band_pivots, difference_spectrum
+        from clsdcam.algorithms.admm.terms import band_coupling, band_degrees, band_diagonal, band_pivots
 
         p, (hp, wp), (h, w) = split.penalties, split.field_shape, split.sensor_shape
         if hp % (2 * factor) or wp % (2 * factor):
@@ -63,14 +63,10 @@ class MaskedSystem:
         self.factor, self.field_shape = factor, (hp, wp)
         self.shape, self.window = (hp // factor, wp // factor), (h // factor, w // factor)
         transfer = split.transfer.astype(np.complex128)
-        diagonal = p.data * np.abs(transfer) ** 2 + p.nonneg
-        if 1 in split.axes:
-            diagonal = diagonal + p.tv_along(1) * difference_spectrum(hp)[:, None]
-        if 2 in split.axes:
-            diagonal = diagonal + p.tv_along(2) * difference_spectrum(wp, half=True)[None, :]
+        diagonal = band_diagonal(p, split.axes, np.abs(transfer) ** 2, (hp, wp))
         self.full_transfer, self.data = transfer, p.data
         self.transfer, self.diagonal = low_band(transfer, self.shape), low_band(diagonal, self.shape)
-        self.coupling = p.tv_along(0) if 0 in split.axes else 0.0
+        self.coupling = band_coupling(p, split.axes)
         self.degrees = band_degrees(split.n_bands)[:, None, None]
         self.pivots = band_pivots(self.diagonal, self.coupling, split.n_bands)
         self.weights = np.full(self.shape[1] // 2 + 1, 2.0)
@@ -99,14 +95,10 @@ class MaskedSystem:
         return out - self.pulled(scipy.fft.irfft2(self.transfer * v, s=self.shape))
 
     def precondition(self, r: np.ndarray) -> np.ndarray:
-        """P⁻¹·r̂ by Thomas's sweeps along λ (:func:`clsdcam.algorithms.admm.terms.band_pivots`)."""
-        e, m, g = self.coupling, self.pivots, np.empty_like(r)
-        g[0] = r[0] * m[0]
-        for j in range(1, len(r)):
-            g[j] = (r[j] + e * g[j - 1]) * m[j]
-        for j in range(len(r) - 2, -1, -1):
-            g[j] += e * m[j] * g[j + 1]
-        return g
+        """P⁻¹·r̂ by the solve along λ's own Thomas sweeps (:func:`clsdcam.algorithms.admm.host_steps.sweep_bands`)."""
+        from clsdcam.algorithms.admm.host_steps import sweep_bands
+
+        return sweep_bands(r.copy(), self.pivots, self.coupling, {})
 
     def correction(self, r: np.ndarray, steps: int) -> np.ndarray:
         """δ̂ after ``steps`` of P⁻¹-preconditioned conjugate gradients on A·δ̂ = r̂ from 0."""

@@ -99,6 +99,18 @@ def band_coupling(p: Penalties, axes) -> float:
     return p.tv_along(0) if 0 in axes else 0.0
 
 
+def band_diagonal(p: Penalties, axes, transfer_power: np.ndarray, field_shape) -> np.ndarray:
+    """a = μ₁|Ĥ|² + μ₂,y|d̂_y|² + μ₂,x|d̂_x|² + μ₃ over the (Hp, Wp) field's half spectrum (``transfer_power`` |Ĥ|²;
+    TV's terms on ``axes`` only): the diagonal of the c-step's system along λ at each Fourier coefficient."""
+    hp, wp = field_shape
+    spatial = p.data * transfer_power
+    if 1 in axes:
+        spatial = spatial + p.tv_along(1) * difference_spectrum(hp)[:, None]
+    if 2 in axes:
+        spatial = spatial + p.tv_along(2) * difference_spectrum(wp, half=True)[None, :]
+    return spatial + p.nonneg
+
+
 def difference_spectrum(n: int, half: bool = False) -> np.ndarray:
     """|d̂(k)|² = 2 − 2cos(2πk/n) of the circular forward difference (k < n//2 + 1 when ``half``)."""
     k = np.arange(n // 2 + 1 if half else n)
@@ -142,13 +154,8 @@ class CalibrationTerms:
     def _penalty_terms(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         gain = (self.filters / (p.data + self.filter_energy)).astype(self.dtype)
         data_transfer = (p.data * np.conj(self.transfer)).astype(self.cdtype)
-        hp, wp = self.field_shape
-        spatial = p.data * self.transfer_power
-        if 1 in axes:
-            spatial = spatial + p.tv_along(1) * difference_spectrum(hp)[:, None]
-        if 2 in axes:
-            spatial = spatial + p.tv_along(2) * difference_spectrum(wp, half=True)[None, :]
-        pivots = band_pivots(spatial + p.nonneg, band_coupling(p, axes), self.n_bands)
+        diagonal = band_diagonal(p, axes, self.transfer_power, self.field_shape)
+        pivots = band_pivots(diagonal, band_coupling(p, axes), self.n_bands)
         return gain, data_transfer, pivots.astype(self.dtype)
 
 
