@@ -566,14 +566,25 @@ def test_admm_band_solve_matches_numpy_on_one_and_two_bands(dtype, n_bands, path
     assert_band_solves_match(pair, random_states(pair, backend)[2], backend, 2e-6 if dtype == "float32" else 1e-12)
 
 
-def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_memory):
+@pytest.fixture
+def without_margin(monkeypatch):
+    """The host's ADMM without the margin's correction, which the kernels do not take yet (docs/convergence.md, "The
+    margin's correction built"): the same iteration on both."""
+    from clsdcam.algorithms.admm import algorithm
+
+    monkeypatch.setattr(algorithm, "MARGIN_STEPS", 0)
+
+
+def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_memory, without_margin):
     """float32 ADMM (TV and L1) on a simulated scene, every new device array starting as NaN (a GPU's garbage): the
-    cube agrees with NumPy's to 1e-4 (relative L2) after as many iterations as FISTA's test."""
+    cube agrees with NumPy's (its steps without the margin's correction) to 1e-4 (relative L2) after as many
+    iterations as FISTA's test."""
     priors = {"algorithm": "admm", "tv": 3e-3, "l1": 1e-3}
     assert_reconstructs(simulation, priors, new_backend("float32", engine), RECONSTRUCTION[cl_tiny][2])
 
 
-def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(simulation, engine, cl_tiny):
+def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(simulation, engine, cl_tiny,
+                                                                               without_margin):
     """A second frame (half as bright) resumes from the first's splits and duals, rescaled on the device: its cube
     matches NumPy's second frame to 1e-4 (relative L2), and the device's upload of the terms is made once."""
     from clsdcam import Settings, Solver

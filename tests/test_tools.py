@@ -10,7 +10,6 @@ from conftest import opencl_device
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import admm_acceleration  # noqa: E402
 import admm_duals  # noqa: E402
-import admm_masked  # noqa: E402
 import bench_accuracy  # noqa: E402
 import bench_admm  # noqa: E402
 import bench_admm_passes  # noqa: E402
@@ -525,90 +524,6 @@ def test_the_fixed_point_data_dual_is_the_one_admm_converges_to(monkeypatch):
     sim = bench_panel.panel_scene(plan, (24, 32), 4)
     early, late = distance(200), distance(3000)
     assert late < 0.1 and late < early / 10
-
-
-def masked_operator(split, v: np.ndarray) -> np.ndarray:
-    """(μ₁HᵀMH + Σ_d μ₂,dD_dᵀD_d + μ₃I)·v in real space, from the host steps' own convolution and differences (M the
-    sensor window), in float64."""
-    from clsdcam.algorithms.admm.host_steps import difference, difference_adjoint_add
-
-    (h, w), p = split.sensor_shape, split.penalties
-    hv = split.convolve(v).astype(np.float64)
-    hv[:, h:], hv[:, :h, w:] = 0, 0
-    out = p.data * np.fft.irfft2(np.fft.rfft2(hv) * np.conj(split.transfer), s=split.field_shape) + p.nonneg * v
-    for axis in split.axes:
-        difference_adjoint_add(difference(v, axis, np.empty_like(v)), axis, p.tv_along(axis), out)
-    return out
-
-
-def test_the_masked_c_step_solves_the_system_with_the_unobserved_split_eliminated(monkeypatch):
-    """The masked system's A, in Fourier, is :func:`masked_operator`; P⁻¹ inverts its unmasked part; the half spectra's
-    inner product is the fields'; a coarser grid that is not even is refused, and a coarse spectrum widened to the
-    field's and cut back is itself; enough conjugate-gradient steps solve A·δ = r. On the state after 50 iterations,
-    the masked c-step's v solves the masked system for the right-hand side the splits left (to 10⁻⁵, where the plain
-    c-step's is 7·10⁻³ from it), and it leaves Ŷ = αĤv̂ + (1 − α)·rfft2(x − ξ) with ``hv`` its window, as the plain
-    c-step does for its v. The variant changes ADMM's road, which leads to the same problem's answer (6 % from ADMM's
-    3000th iterate after 600, as ADMM as built is), and its c-step is put back after it."""
-    import copy
-    from types import SimpleNamespace
-
-    from clsdcam.algorithms.admm.host_steps import Splitting, difference_adjoint_add
-    from clsdcam.algorithms.admm.terms import SplittingBase
-
-    plain, last = SplittingBase.iterate, {}
-
-    def iterate(split, state):
-        last["split"], last["state"] = split, state
-        return plain(split, state)
-
-    monkeypatch.setattr(SplittingBase, "iterate", iterate)
-    plan = bench_panel.scene_plan(1, 3, ["piecewise"])[0]
-    sim = bench_panel.panel_scene(plan, (24, 32), 4)
-    answer, _ = bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 3000, "algorithm": "admm"})
-    split, rng = last["split"], np.random.default_rng(4)
-    system = admm_masked.MaskedSystem(split)
-    v = rng.random(split.shape)
-    spectrum, direct = np.fft.rfft2(v), np.fft.rfft2(masked_operator(split, v))
-    assert np.abs(system.apply(spectrum) - direct).max() < 1e-5 * np.abs(direct).max()
-    unmasked = system.apply(spectrum) + system.pulled(np.fft.irfft2(system.transfer * spectrum, s=split.field_shape))
-    assert np.abs(system.precondition(unmasked) - spectrum).max() < 1e-9 * np.abs(spectrum).max()
-    r = np.fft.rfft2(rng.random(split.shape))
-    assert np.abs(system.apply(system.correction(r, 200)) - r).max() < 1e-8 * np.abs(r).max()
-    small = SimpleNamespace(penalties=split.penalties, field_shape=(8, 12), sensor_shape=(4, 6), axes=split.axes,
-                            n_bands=2, transfer=np.ones((8, 7), np.complex64))
-    a, b = rng.random((2, 2, 8, 12))
-    inner = admm_masked.MaskedSystem(small).dot(np.fft.rfft2(a), np.fft.rfft2(b))
-    assert inner == pytest.approx(8 * 12 * np.sum(a * b))
-    with pytest.raises(ValueError, match="no even grid"):
-        admm_masked.MaskedSystem(small, 3)
-    coarse = admm_masked.MaskedSystem(split, 2)
-    low = np.fft.rfft2(rng.random(coarse.shape))
-    assert np.allclose(admm_masked.low_band(admm_masked.widened(low, split.field_shape), coarse.shape), low)
-
-    built, _ = bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 50, "algorithm": "admm"})
-    state, (h, w), alpha = copy.deepcopy(last["state"]), split.sensor_shape, split.relaxation   # after 50 iterations
-    data = split.data_split(state).astype(np.float64)
-    data[:, :h, :w] -= state.xi                                                   # x − ξ over the field
-    masked_data = np.zeros_like(data)
-    masked_data[:, :h, :w] = data[:, :h, :w]
-    rhs = split.penalties.data * np.fft.irfft2(np.fft.rfft2(masked_data) * np.conj(split.transfer), s=split.field_shape)
-    rhs += state.rest
-    for i, axis in enumerate(split.axes):
-        difference_adjoint_add(state.s[i].astype(np.float64), axis, split.penalties.tv_along(axis), rhs)
-    admm_masked.masked_c_step(split, state, 200, Splitting.c_step)
-    assert np.linalg.norm(masked_operator(split, state.v.astype(np.float64)) - rhs) < 1e-5 * np.linalg.norm(rhs)
-    relaxed = alpha * split.transfer * np.fft.rfft2(state.v) + (1 - alpha) * np.fft.rfft2(data)
-    assert np.abs(state.data_spectrum - relaxed).max() < 1e-5 * np.abs(relaxed).max()
-    window = np.fft.irfft2(state.data_spectrum, s=split.field_shape)[:, :h, :w]
-    np.testing.assert_allclose(state.hv, window, atol=1e-5 * np.abs(window).max())
-
-    with admm_masked.masked_c_steps({"masked": 3}):
-        early, _ = bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 50, "algorithm": "admm"})
-        masked, _ = bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 600, "algorithm": "admm"})
-    assert Splitting.c_step.__name__ == "c_step" and not np.allclose(early.cube, built.cube, rtol=1e-3, atol=1e-4)
-    as_built, _ = bench_converged.timed_solve(sim, {"tv": 1e-3, "iters": 600, "algorithm": "admm"})
-    for run in (masked, as_built):
-        assert np.linalg.norm(run.cube - answer.cube) < 0.06 * np.linalg.norm(answer.cube)
 
 
 def test_bench_converged_measures_the_duals_variants_and_restores_the_solver(tmp_path, piecewise_panel):

@@ -35,8 +35,9 @@ for a change that leaves the model's answer where it was (a faster pass), whose 
 the cached one's in the last digits.
 
 ``--variants 'alpha=1.7,tv=0.003;alpha=1'`` measures ADMM's constants instead (``clsdcam.algorithms.admm``'s DATA,
-TV, NONNEG, RELAXATION and BALANCE_AT, and THRESHOLD_OVER_RMS and THRESHOLD_FEW_POINTS of its balance, by the names
-data, tv, nonneg, alpha, balance_at, balance and few_balance; ``balance_at=1e9``: no balance): each variant runs
+TV, NONNEG, RELAXATION, MARGIN_STEPS and BALANCE_AT, and THRESHOLD_OVER_RMS and THRESHOLD_FEW_POINTS of its
+balance, by the names data, tv, nonneg, alpha, margin, balance_at, balance and few_balance; ``balance_at=1e9``: no
+balance): each variant runs
 ``--variant-iters`` at the scene's weight, told what the default's probe found (point-like, a few points; not an
 accelerated variant, below), scored every 10 iterations, and the table gives the mark from which it stays within the rules and
 where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``variants.json``). The names
@@ -47,8 +48,6 @@ iterations' (the model's own answer: the bound on any start of the primal alone,
 "start" is what making it took, in the variant's own iterations' time. ``duals=1`` (ξ) or ``2`` (every dual) sets
 the start's duals at their fixed-point values for its cube, ``refresh=N`` sets them so from the iterate at
 iteration N, ``rebalance=N`` balances the TV penalties again there (:mod:`admm_duals`; "restarts" counts them).
-``masked=N`` takes N conjugate-gradient steps a c-step towards the masked system, the data split's unobserved part
-eliminated (:mod:`admm_masked`).
 """
 from __future__ import annotations
 
@@ -63,7 +62,6 @@ import numpy as np
 
 from admm_acceleration import ACCELERATIONS, accelerated
 from admm_duals import DUAL_VARIANTS, dual_variants
-from admm_masked import MASKED_VARIANTS, masked_c_steps
 from bench_accuracy import Where, add_backend_option, panel_parser, report, save_json, size_text, timed_run
 from bench_panel import (add_kinds_option, chosen_scenes, panel_scene, scene_indices, progress, scene_done,
                          scene_name)
@@ -220,9 +218,10 @@ def settled_within(points: list[dict], ref: dict) -> int | None:
 # a constant's name -> (its module in clsdcam.algorithms.admm, the constant)
 ADMM_CONSTANTS = {"data": ("algorithm", "DATA"), "tv": ("algorithm", "TV"), "nonneg": ("algorithm", "NONNEG"),
                   "alpha": ("algorithm", "RELAXATION"), "balance_at": ("algorithm", "BALANCE_AT"),
+                  "margin": ("algorithm", "MARGIN_STEPS"),
                   "balance": ("balance", "THRESHOLD_OVER_RMS"), "few_balance": ("balance", "THRESHOLD_FEW_POINTS")}
 STARTS = {"fista_start": "fista", "answer_start": "admm"}   # a start's name -> the algorithm that makes its cube
-VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS, *STARTS, *DUAL_VARIANTS, *MASKED_VARIANTS)
+VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS, *STARTS, *DUAL_VARIANTS)
 
 
 def parse_variants(text: str) -> list[dict]:
@@ -275,7 +274,7 @@ def variant_runs(plan: dict, shape, bands: int, args, cache: Path) -> dict:
         x0, start_seconds = variant_start(sim, tau, variant)
         told = {} if any(name in variant for name in ACCELERATIONS) else probe
         with admm_constants(variant), accelerated(variant) as events, dual_variants(variant, events), \
-                masked_c_steps(variant), told_point_like(**told):
+                told_point_like(**told):
             result, seconds = timed_solve(sim, {"tv": tau, "iters": args.variant_iters, "algorithm": "admm"},
                                           range(10, args.variant_iters + 1, 10), x0)
         run = {"points": curve(sim, result), "change": [r["change"] for r in result.history]}
@@ -504,9 +503,9 @@ def main(argv=None) -> int:
             Settings(converge=args.converge)          # the package's own rule for --converge
         except InputError as error:
             parser.error(str(error))
-    host_only = {*ACCELERATIONS, *DUAL_VARIANTS, *MASKED_VARIANTS}
+    host_only = {*ACCELERATIONS, *DUAL_VARIANTS, "margin"}
     if args.backend != "numpy" and any(set(v) & host_only for v in args.variants):
-        parser.error("--variants momentum/anderson/spectral/duals/refresh/rebalance/masked wrap the host steps: "
+        parser.error("--variants momentum/anderson/spectral/duals/refresh/rebalance/margin wrap the host steps: "
                      "--backend numpy")
     if args.against and args.variants:
         parser.error("--against re-times the default and today: no --variants")

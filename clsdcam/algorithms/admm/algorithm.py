@@ -61,6 +61,9 @@ NONNEG_FEW_POINTS = 1e-3
 # 0.015 two of five ended 0.27–0.30 dB short of their answer); unhalved, nine of them stop 5 % sooner at 0.01, all
 # within (docs/convergence.md, "A wider stop for a few points in good light")
 LIGHTER_FEW_POINTS = 0.5
+# conjugate-gradient steps of the margin's correction in each c-step on the host (0: none; margin.py, and
+# docs/convergence.md, "The margin's correction built")
+MARGIN_STEPS = 10
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
 # mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64
 # panels' lines scenes, 0.0035–0.21 on their other 80 (docs/convergence.md, "A lighter weight for point-like scenes")
@@ -112,7 +115,7 @@ def band_steps(problem) -> "SplittingBase":
         from .kernel_steps import KernelSplitting
 
         return KernelSplitting(model, problem.b, terms, tv, l1, RELAXATION)
-    return host_steps()(model, backend.to_host(problem.b), terms, tv, l1, backend.workers, RELAXATION)
+    return host_steps()(model, backend.to_host(problem.b), terms, tv, l1, backend.workers, RELAXATION, MARGIN_STEPS)
 
 
 class Admm(Algorithm):

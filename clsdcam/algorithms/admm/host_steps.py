@@ -1,7 +1,7 @@
 """ADMM's steps on NumPy arrays: :class:`Splitting`, the iteration :mod:`clsdcam.algorithms.admm` derives, with both
 passes and the c-step's solve along λ on cache-sized row blocks on the host's threads (``backends/blocks``): the
-iteration reads each cube about twice besides its transforms. The first differences D_d and their adjoints, and
-the tridiagonal sweeps along λ, are here too.
+iteration reads each cube about twice besides its transforms. The first differences D_d and their adjoints are
+here too (the tridiagonal sweeps along λ are :func:`~.terms.sweep_bands`).
 
 The data split on the sensor window. Outside the window the x-step is the relaxation alone (ξ = 0 there): x − ξ
 becomes y = αHv + (1 − α)(x − ξ). So the host keeps x − ξ over the field as its spectrum Ŷ and steps it there, and x
@@ -17,7 +17,8 @@ import numpy as np
 import scipy.fft
 
 from ...backends import irfft2, irfft2_to_window, map_blocks, rfft2_of_window, scratch_buffer
-from .terms import CalibrationTerms, SplitState, SplittingBase
+from .margin import MarginCorrection
+from .terms import CalibrationTerms, SplitState, SplittingBase, sweep_bands
 
 FFT_CHUNK_BYTES = 4 << 20     # spectrum bytes per chunk of bands in the transforms (host_convolution's)
 
@@ -79,25 +80,6 @@ def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarr
     return out
 
 
-def sweep_bands(g: np.ndarray, pivots: np.ndarray, coupling, scratch: dict) -> np.ndarray:
-    """g ← v with (a·I + e·D_λᵀD_λ)v = g along axis 0, one system per (y, x), by Thomas's sweeps on the pivots m of
-    :func:`~.terms.band_pivots` (e = ``coupling``, in g's real precision): forward g_j ← (g_j + e·g_{j−1})·m_j, back
-    g_j ← g_j + (e·m_j)·g_{j+1}; each step one plane of the block (``kernels/admm.cl``'s admm_band_solve, in its
-    order)."""
-    g[0] *= pivots[0]
-    if not coupling:
-        g[1:] *= pivots[1:]
-        return g
-    term = scratch_buffer(scratch, "sweep term", g.shape[1:], g.dtype)
-    factor = scratch_buffer(scratch, "sweep factor", pivots.shape[1:], pivots.dtype)
-    for j in range(1, len(g)):
-        g[j] += np.multiply(g[j - 1], coupling, out=term)
-        g[j] *= pivots[j]
-    for j in range(len(g) - 2, -1, -1):
-        g[j] += np.multiply(g[j + 1], np.multiply(pivots[j], coupling, out=factor), out=term)
-    return g
-
-
 def relax(q: np.ndarray, previous: np.ndarray, alpha: float) -> np.ndarray:
     """q ← αq + (1 − α)·previous in place (nothing when α = 1): a split's over-relaxed point, α and 1 − α rounded
     to q's precision as the kernels round them."""
@@ -113,13 +95,19 @@ class Splitting(SplittingBase):
     ``workers`` threads; ``b`` the normalised measurement."""
 
     def __init__(self, model, b: np.ndarray, terms: CalibrationTerms, tv=None, l1=None, workers: int = 1,
-                 relaxation: float = 1.0):
+                 relaxation: float = 1.0, margin_steps: int = 0):
         super().__init__(model, terms, tv, l1, relaxation)
-        self.workers = workers
+        self.workers, self.margin_steps = workers, margin_steps
+        self.margin: MarginCorrection | None = None
         self.b = np.asarray(b, self.dtype)
         self.filters, self.transfer = terms.filters, terms.transfer
         self.chunk = max(1, FFT_CHUNK_BYTES // (self.field_shape[0] * (self.field_shape[1] // 2 + 1) *
                                                 np.dtype(self.cdtype).itemsize))
+
+    def set_penalties(self, penalties):
+        """The penalties, what depends on them, and the margin's correction of them (``margin_steps`` > 0)."""
+        super().set_penalties(penalties)
+        self.margin = MarginCorrection(self, self.margin_steps) if self.margin_steps > 0 else None
 
     # ---- the state -----------------------------------------------------------------------------------------
     def start(self, v0: np.ndarray) -> tuple[SplitState, float]:
@@ -144,12 +132,16 @@ class Splitting(SplittingBase):
     # ---- one iteration -------------------------------------------------------------------------------------
     def c_step(self, state: SplitState) -> None:
         """v from the right-hand side the last splits left (x − ξ in Ŷ once the window's change in ``hv`` is added,
-        the rest in ``rest``); Ŷ then the relaxed αĤv̂ + (1 − α)Ŷ, and ``hv`` its window (the module docstring)."""
+        the rest in ``rest``); Ŷ then the relaxed αĤv̂ + (1 − α)Ŷ, and ``hv`` its window (the module docstring); with
+        the margin's correction (:mod:`.margin`) v̂ and Ŷ corrected before the inverse transforms."""
         solved, change = state.spectra
         self._window_rfft2(state.hv, change)
         self._add_tv_adjoint(state)
         self._rfft2(state.rest, solved)
+        data_split = self.margin.data_split(state, change) if self.margin else None
         self._band_solve(state.data_spectrum, change, solved)       # Ŷ, and its copy in ``change``
+        if self.margin:
+            self.margin.correct(solved, (state.data_spectrum, change), data_split)
         self._irfft2(solved, state.v)
         self._irfft2_to_window(change, state.hv)
 
@@ -326,6 +318,7 @@ class Splitting(SplittingBase):
         nothing left in ``hv``."""
         h, w = self.sensor_shape
         state.xi[...] = xi
+        state.window_dual = None
         state.x[...] = x[:, :h, :w]
         y = np.array(x, self.dtype)
         y[:, :h, :w] -= state.xi

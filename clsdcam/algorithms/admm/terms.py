@@ -1,12 +1,13 @@
 """What ADMM's steps share on every backend (:mod:`clsdcam.algorithms.admm`): the penalties, the state's arrays,
-the calibration's terms (built once per solver and kept in its shared store) and the base of the steps, with the
-problem's scales the penalties are set from."""
+the calibration's terms (built once per solver and kept in its shared store), the c-step's tridiagonal solve along λ
+on the host, and the base of the steps, with the problem's scales the penalties are set from."""
 from __future__ import annotations
 
 from dataclasses import astuple, dataclass, fields, replace
 
 import numpy as np
 
+from ...backends import scratch_buffer
 from ...camera.geometry import transfer_function
 
 TERMS_KEY = "admm calibration terms"     # the solver's shared store keeps the CalibrationTerms under this name
@@ -39,7 +40,9 @@ class SplitState:
     rest, the two spectra the c-step works in; and the penalties the scaled duals are in (a video's next frame resumes
     with them). The host's steps keep the data split on the sensor window (:class:`~.host_steps.Splitting`): x and ξ
     there, x − ξ over the field as its spectrum ``data_spectrum`` (None on the kernels), and in ``hv`` the window of
-    its relaxed point after the c-step, the window's change to it after the splits."""
+    its relaxed point after the c-step, the window's change to it after the splits; with the margin's correction
+    (:mod:`.margin`), ``window_dual`` the low band of ξ's spectrum it tracks (None where anything but the splits set
+    ξ, and on the kernels)."""
 
     v: np.ndarray
     hv: np.ndarray
@@ -53,6 +56,7 @@ class SplitState:
     spectra: tuple
     penalties: Penalties | None = None
     data_spectrum: object = None
+    window_dual: object = None
 
     def arrays(self) -> list:
         """Every array of the state but the c-step's spectra (what a resumed solve scales into its units)."""
@@ -92,6 +96,25 @@ def band_pivots(diagonal: np.ndarray, coupling: float, n_bands: int) -> np.ndarr
     for j in range(1, n_bands):
         pivots[j] = 1.0 / (diagonal + coupling * degrees[j] - coupling * coupling * pivots[j - 1])
     return pivots
+
+
+def sweep_bands(g: np.ndarray, pivots: np.ndarray, coupling, scratch: dict) -> np.ndarray:
+    """g ← v with (a·I + e·D_λᵀD_λ)v = g along axis 0, one system per (y, x), by Thomas's sweeps on the pivots m of
+    :func:`band_pivots` (e = ``coupling``, in g's real precision): forward g_j ← (g_j + e·g_{j−1})·m_j, back
+    g_j ← g_j + (e·m_j)·g_{j+1}; each step one plane of the block (``kernels/admm.cl``'s admm_band_solve, in its
+    order)."""
+    g[0] *= pivots[0]
+    if not coupling:
+        g[1:] *= pivots[1:]
+        return g
+    term = scratch_buffer(scratch, "sweep term", g.shape[1:], g.dtype)
+    factor = scratch_buffer(scratch, "sweep factor", pivots.shape[1:], pivots.dtype)
+    for j in range(1, len(g)):
+        g[j] += np.multiply(g[j - 1], coupling, out=term)
+        g[j] *= pivots[j]
+    for j in range(len(g) - 2, -1, -1):
+        g[j] += np.multiply(g[j + 1], np.multiply(pivots[j], coupling, out=factor), out=term)
+    return g
 
 
 def band_coupling(p: Penalties, axes) -> float:

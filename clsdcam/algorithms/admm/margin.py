@@ -1,0 +1,164 @@
+"""The c-step's correction for the field's margin (the host's steps): a few conjugate-gradient steps, on a coarse grid,
+towards the c-step with the data split's unobserved part eliminated. docs/convergence.md ("Where the road left lies",
+"The margin's correction built") has the measurements.
+
+Why. ADMM splits x = Hv over the whole field, so that its c-step is diagonal in Fourier. Outside the sensor window
+no data bind x (ξ = 0 there), and the c-step's μ₁/2‖Hv − (x − ξ)‖² over that margin only pulls Hv back towards its
+last value: an inertia on smooth light, which the PSF spreads nearly alike from the window and the margin, so that
+light drains from the margin into the window over hundreds of iterations. Minimised over x in the margin as well as
+over v, that term vanishes, and the c-step is the masked system (M the window)
+
+    A v = (μ₁HᵀMH + μ₂ΣD_dᵀD_d + μ₃I) v = μ₁HᵀM(x − ξ) + rest,      A = P − μ₁Hᵀ(I − M)H,
+
+P = μ₁HᵀH + μ₂ΣD_dᵀD_d + μ₃I the c-step's own matrix, solved exactly in Fourier. From the c-step's v₀ = P⁻¹(μ₁Hᵀ(x −
+ξ) + rest), the masked system's residual is r₀ = μ₁Hᵀ(I − M)(Hv₀ − x) (ξ = 0 in the margin), and ``steps`` of
+conjugate gradients preconditioned by P⁻¹ give a correction δ: v ← v₀ + δ, and the relaxed data split Ŷ ← Ŷ + αĤδ̂.
+
+Where. The slow part is smooth light (about 60 numbers of a 128×160×64 cube), so δ is sought among the field's
+lowest frequencies alone, |k_y| < B_y and |k_x| < B_x (:data:`BAND`; :class:`Band`), by the Galerkin system there:
+ΠAΠ = ΠPΠ − μ₁Ĥ*(I − T)Ĥ, with T = ΠMΠ the window's mask seen on the band. The window is a rectangle at the
+origin, so T is the Kronecker product of two small matrices, one per axis, T_y[k, k′] = (1/Hp)Σ_{n<h} e^(−2πi(k−k′)n/Hp)
+(and T_x alike): each application two small matrix products a band, no transform. The correction is then the
+masked solve's A-orthogonal projection onto the band, which cannot overshoot it in A's norm (a coarse grid's own
+mask, tried first, made the iteration diverge on small fields). The residual is r₀'s band with the mask's
+leakage from higher frequencies left out, μ₁Ĥ*(I − T)·band(Ĥv̂₀ − x̂). It needs only what the c-step has before its
+inverse transforms: v̂₀, and x̂ = Ŷ + Ξ, with Ξ the band of ξ's spectrum (its window zero-padded), tracked from the
+window transform the c-step makes anyway. After the splits' step ``hv`` holds (2 − α)ξ − 2ξ⁺, so
+
+    Ξ⁺ = ((2 − α)Ξ − rfft2(hv)) / 2,
+
+a recursion whose rounding decays by (2 − α)/2 an iteration; it starts from a pruned transform of ξ wherever
+anything but the splits set ξ (``SplitState.window_dual`` None). The correction adds to the band of v̂ and Ŷ, before
+the c-step's inverse transforms: it costs no field transform.
+
+Exact. At a fixed point of the corrected iteration x = Hv over the field, so Hv₀ − x = −Hδ and r₀ is linear in δ:
+δ = 0 there, and the fixed point is the plain c-step's, the problem's minimiser, whatever the band.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...backends import rfft2_of_window
+from .terms import band_coupling, band_degrees, band_diagonal, band_pivots, sweep_bands
+
+BAND = (8, 10)     # the correction's frequencies |k_y| < 8, |k_x| < 10 cycles over the field (fewer on a small one)
+
+
+def window_mask_matrix(frequencies: np.ndarray, length: int, window: int) -> np.ndarray:
+    """T[k, k′] = (1/N)Σ_{n<h} e^(−2πi(k−k′)n/N) for the signed ``frequencies`` k, k′ of a length-N axis whose first
+    h = ``window`` samples are the window: the mask's product seen in Fourier, (Mz)^_k = Σ_k′ T[k, k′] ẑ_k′."""
+    n = np.arange(window)
+    shifts = frequencies[:, None] - frequencies[None, :]
+    return np.exp(-2j * np.pi * shifts[..., None] * n / length).sum(axis=-1) / length
+
+
+class Band:
+    """The field's lowest frequencies |k_y| < b_y, 0 ≤ k_x < b_x of its half spectrum (…, Hp, Wp//2 + 1), the rows
+    in signed order −(b_y − 1)…b_y − 1 (b_y ≤ Hp/2 and b_x ≤ Wp/2, so that no Nyquist frequency is among them), and
+    the window's mask T = T_y ⊗ T_x on them (:func:`window_mask_matrix`)."""
+
+    def __init__(self, field_shape, window_shape, band=BAND, dtype=np.complex128):
+        (hp, wp), (h, w) = field_shape, window_shape
+        by, bx = min(band[0], hp // 2), min(band[1], wp // 2)
+        self.rows, self.columns = np.arange(1 - by, by), bx
+        self._field_rows = self.rows % hp
+        self._mask_y = window_mask_matrix(self.rows.astype(float), hp, h).astype(dtype)
+        self._mask_x = window_mask_matrix(np.arange(1 - bx, bx).astype(float), wp, w).T.astype(dtype)
+
+    def take(self, spectrum: np.ndarray) -> np.ndarray:
+        """The band of ``spectrum`` (a copy)."""
+        return spectrum[..., self._field_rows, :self.columns]
+
+    def add(self, spectrum: np.ndarray, band: np.ndarray) -> None:
+        """spectrum += ``band`` zero-padded to the field's half spectrum, in place."""
+        spectrum[..., self._field_rows, :self.columns] += band
+
+    def masked(self, z: np.ndarray) -> np.ndarray:
+        """T·z on the band: z's columns k_x < 0 from Hermitian symmetry (ẑ_{−k} = conj ẑ_k), T_y z T_xᵀ, then its
+        columns k_x ≥ 0."""
+        whole = np.concatenate([np.conj(z[..., ::-1, :0:-1]), z], axis=-1)
+        return (self._mask_y @ whole @ self._mask_x)[..., self.columns - 1:]
+
+
+class MarginCorrection:
+    """ΠAΠ and P⁻¹ of one splitting's penalties on the band, and the correction they make (the module docstring);
+    built again for new penalties (``Splitting.set_penalties``)."""
+
+    def __init__(self, split, steps: int, band=BAND):
+        p, axes, k = split.penalties, split.axes, split.n_bands
+        self.steps, self.relaxation, self.workers = int(steps), split.relaxation, split.workers
+        self.field_shape, self.band = split.field_shape, Band(split.field_shape, split.sensor_shape, band, split.cdtype)
+        real = split.dtype.type
+        self.transfer = self.band.take(split.transfer)
+        self.data_transfer = (p.data * np.conj(self.transfer)).astype(split.cdtype)
+        diagonal = self.band.take(band_diagonal(p, axes, split.terms.transfer_power, split.field_shape))
+        self.coupling = real(band_coupling(p, axes))
+        self.diagonal = (diagonal + float(self.coupling) * band_degrees(k)[:, None, None]).astype(split.dtype)
+        self.pivots = band_pivots(diagonal, float(self.coupling), k).astype(split.dtype)
+        self.weights = np.full(self.band.columns, 2.0, split.dtype)
+        self.weights[0] = 1.0
+        self._scratch: dict = {}
+
+    # ---- the data split's band -----------------------------------------------------------------------------
+    def data_split(self, state, change: np.ndarray) -> np.ndarray:
+        """x̂'s band, Ŷ + rfft2(hv) + Ξ (``change`` = rfft2(hv), not yet added to Ŷ), Ξ tracked in
+        ``state.window_dual`` (the module docstring)."""
+        fresh = self.band.take(change)
+        if state.window_dual is None:
+            state.window_dual = self.band.take(rfft2_of_window(state.xi, self.field_shape, self.workers))
+        else:
+            state.window_dual *= state.window_dual.real.dtype.type((2 - self.relaxation) / 2)
+            state.window_dual -= fresh / 2
+        fresh += self.band.take(state.data_spectrum)
+        fresh += state.window_dual
+        return fresh
+
+    # ---- the correction ------------------------------------------------------------------------------------
+    def correct(self, solved: np.ndarray, relaxed: tuple, data_split: np.ndarray) -> None:
+        """v̂ (``solved``) += δ̂, and each of the ``relaxed`` spectra (Ŷ and its copy) += αĤδ̂, from v̂₀ = ``solved``
+        and x̂'s band ``data_split`` (:meth:`data_split`)."""
+        apart = self.transfer * self.band.take(solved) - data_split                # Ĥv̂₀ − x̂
+        delta = self._solve(self._pulled(apart))
+        self.band.add(solved, delta)
+        delta *= self.transfer
+        delta *= delta.real.dtype.type(self.relaxation)
+        for spectrum in relaxed:
+            self.band.add(spectrum, delta)
+
+    def _pulled(self, z: np.ndarray) -> np.ndarray:
+        """μ₁Ĥ*(I − T)·z on the band."""
+        return self.data_transfer * (z - self.band.masked(z))
+
+    def _apply(self, v: np.ndarray) -> np.ndarray:
+        """ΠAΠ·v̂ = P·v̂ − μ₁Ĥ*(I − T)Ĥ·v̂ (P tridiagonal along λ at each coefficient)."""
+        out = self.diagonal * v
+        if self.coupling:
+            out[1:] -= self.coupling * v[:-1]
+            out[:-1] -= self.coupling * v[1:]
+        out -= self._pulled(self.transfer * v)
+        return out
+    def _precondition(self, r: np.ndarray) -> np.ndarray:
+        """P⁻¹·r̂ by the c-step's own Thomas sweeps along λ."""
+        return sweep_bands(r.copy(), self.pivots, self.coupling, self._scratch)
+
+    def _dot(self, a: np.ndarray, b: np.ndarray) -> float:
+        """⟨a, b⟩ of the real fields whose half spectra's bands a and b are (up to the transform's constant)."""
+        return float(np.sum(self.weights * (a.real * b.real + a.imag * b.imag), dtype=np.float64))
+
+    def _solve(self, r: np.ndarray) -> np.ndarray:
+        """δ̂ after ``steps`` of P⁻¹-preconditioned conjugate gradients on A·δ̂ = r̂ from 0."""
+        delta, z = np.zeros_like(r), self._precondition(r)
+        p, rz = z, self._dot(r, z)
+        for step in range(self.steps):
+            if not rz > 0:
+                break
+            ap = self._apply(p)
+            length = rz / self._dot(p, ap)
+            delta += length * p
+            if step + 1 == self.steps:
+                break
+            r = r - length * ap
+            z = self._precondition(r)
+            rz, last = self._dot(r, z), rz
+            p = z + (rz / last) * p
+        return delta
