@@ -1,6 +1,6 @@
-"""ADMM's margin correction (clsdcam.algorithms.admm.margin): the coarse grid's half spectrum, its masked system
-against the operator written in real space, the conjugate-gradient solve, the tracked spectrum of ξ, and the fixed
-point it leaves where it is."""
+"""ADMM's margin correction (clsdcam.algorithms.admm.margin): the band of the lowest frequencies and the window's mask
+on it, its masked system against the operator written in real space, the conjugate-gradient solve, the tracked
+spectrum of ξ, and the fixed point it leaves where it is."""
 import dataclasses
 
 import numpy as np
@@ -109,8 +109,8 @@ def converged(split, state, limit=40000):
 
 
 def test_the_correction_leaves_the_fixed_point_where_it_is():
-    """ADMM's fixed point, reached without the correction, stays where it is with it (three steps on the coarse
-    grid); and ADMM with it from the start reaches the same point."""
+    """ADMM's fixed point, reached without the correction, stays where it is with it (three steps on the band);
+    and ADMM with it from the start reaches the same point."""
     split = relaxed_steps(steps=0)
     state, _ = split.start(np.zeros(split.shape))
     at = converged(split, state)

@@ -1,6 +1,6 @@
-"""The c-step's correction for the field's margin (the host's steps): a few conjugate-gradient steps, on a coarse grid,
-towards the c-step with the data split's unobserved part eliminated. docs/convergence.md ("Where the road left lies",
-"The margin's correction built") has the measurements.
+"""The c-step's correction for the field's margin (the host's steps): a few conjugate-gradient steps, on the field's
+lowest frequencies, towards the c-step with the data split's unobserved part eliminated. docs/convergence.md ("Where
+the road left lies", "The margin's correction built") has the measurements.
 
 Why. ADMM splits x = Hv over the whole field, so that its c-step is diagonal in Fourier. Outside the sensor window
 no data bind x (ξ = 0 there), and the c-step's μ₁/2‖Hv − (x − ξ)‖² over that margin only pulls Hv back towards its
@@ -18,12 +18,13 @@ Where. The slow part is smooth light (about 60 numbers of a 128×160×64 cube), 
 lowest frequencies alone, |k_y| < B_y and |k_x| < B_x (:data:`BAND`; :class:`Band`), by the Galerkin system there:
 ΠAΠ = ΠPΠ − μ₁Ĥ*(I − T)Ĥ, with T = ΠMΠ the window's mask seen on the band. The window is a rectangle at the
 origin, so T is the Kronecker product of two small matrices, one per axis, T_y[k, k′] = (1/Hp)Σ_{n<h} e^(−2πi(k−k′)n/Hp)
-(and T_x alike): each application two small matrix products a band, no transform. The correction is then the
-masked solve's A-orthogonal projection onto the band, which cannot overshoot it in A's norm (a coarse grid's own
-mask, tried first, made the iteration diverge on small fields). The residual is r₀'s band with the mask's
-leakage from higher frequencies left out, μ₁Ĥ*(I − T)·band(Ĥv̂₀ − x̂). It needs only what the c-step has before its
-inverse transforms: v̂₀, and x̂ = Ŷ + Ξ, with Ξ the band of ξ's spectrum (its window zero-padded), tracked from the
-window transform the c-step makes anyway. After the splits' step ``hv`` holds (2 − α)ξ − 2ξ⁺, so
+(and T_x alike): each application two small matrix products a band, no transform. The residual is r₀'s band with
+the mask's leakage from higher frequencies left out, μ₁Ĥ*(I − T)·band(Ĥv̂₀ − x̂); for it, the Galerkin system's
+solution is the masked correction's A-orthogonal projection onto the band, which cannot overshoot it in A's norm (a
+coarse grid's own mask, tried first, made the iteration diverge on a small field). It needs only what the c-step has
+before its inverse transforms: v̂₀, and x̂ = Ŷ + rfft2(hv) + Ξ (Ŷ with the window's change), with Ξ the band of ξ's
+spectrum (its window zero-padded), tracked from the window transform the c-step makes anyway. After the splits' step
+``hv`` holds (2 − α)ξ − 2ξ⁺, so
 
     Ξ⁺ = ((2 − α)Ξ − rfft2(hv)) / 2,
 
