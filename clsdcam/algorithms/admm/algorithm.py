@@ -62,7 +62,7 @@ NONNEG_FEW_POINTS = 1e-3
 # within (docs/convergence.md, "A wider stop for a few points in good light")
 LIGHTER_FEW_POINTS = 0.5
 # conjugate-gradient steps of the margin's correction in each c-step on the host (0: none; margin.py, and
-# docs/convergence.md, "The margin's correction built"): 10 measured best, off until the kernels take it too
+# docs/convergence.md, "The margin's correction built"): 10 measured best; off until the kernels take it
 MARGIN_STEPS = 0
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
 # mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64
