@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...backends import rfft2_of_window
-from .terms import band_coupling, band_degrees, band_diagonal, band_pivots, sweep_bands
+from .terms import band_coupling, band_degrees, band_diagonal, sweep_bands
 
 BAND = (8, 10)     # the correction's frequencies |k_y| < 8, |k_x| < 10 cycles over the field (fewer on a small one)
 
@@ -90,12 +90,11 @@ class MarginCorrection:
         self.steps, self.relaxation, self.workers = int(steps), split.relaxation, split.workers
         self.field_shape, self.band = split.field_shape, Band(split.field_shape, split.sensor_shape, band, split.cdtype)
         real = split.dtype.type
-        self.transfer = self.band.take(split.transfer)
-        self.data_transfer = (p.data * np.conj(self.transfer)).astype(split.cdtype)
+        self.transfer, self.data_transfer = self.band.take(split.transfer), self.band.take(split._data_transfer)
+        self.pivots = self.band.take(split._pivots)                 # the c-step's own, of the same penalties
         diagonal = self.band.take(band_diagonal(p, axes, split.terms.transfer_power, split.field_shape))
         self.coupling = real(band_coupling(p, axes))
         self.diagonal = (diagonal + float(self.coupling) * band_degrees(k)[:, None, None]).astype(split.dtype)
-        self.pivots = band_pivots(diagonal, float(self.coupling), k).astype(split.dtype)
         self.weights = np.full(self.band.columns, 2.0, split.dtype)
         self.weights[0] = 1.0
         self._scratch: dict = {}
@@ -138,6 +137,7 @@ class MarginCorrection:
             out[:-1] -= self.coupling * v[1:]
         out -= self._pulled(self.transfer * v)
         return out
+
     def _precondition(self, r: np.ndarray) -> np.ndarray:
         """P⁻¹·r̂ by the c-step's own Thomas sweeps along λ."""
         return sweep_bands(r.copy(), self.pivots, self.coupling, self._scratch)
