@@ -78,25 +78,25 @@ def relaxed_steps(shape=(8, 10), steps=3):
     return split
 
 
-def direct_window_dual(split, state) -> np.ndarray:
+def direct_margin_band(split, state) -> np.ndarray:
     return split.margin.band.take(rfft2_of_window(state.xi, split.field_shape))
 
 
-def test_the_tracked_spectrum_of_the_window_dual_is_its_transform():
+def test_the_tracked_spectrum_of_the_margin_band_is_its_transform():
     """After each c-step, Ξ (tracked by the recursion from the window's change) is the low band of ξ's spectrum, over
     40 relaxed iterations; a new data penalty, which rescales ξ, has it transformed again."""
     split = relaxed_steps()
     state, _ = split.start(np.zeros(split.shape))
     for _ in range(40):
         split.c_step(state)
-        tracked = state.window_dual
-        assert np.abs(tracked - direct_window_dual(split, state)).max() < 1e-10 * np.abs(tracked).max()
+        tracked = state.margin_band
+        assert np.abs(tracked - direct_margin_band(split, state)).max() < 1e-10 * np.abs(tracked).max()
         split.splits(state, split.relaxation)
     new = dataclasses.replace(split.penalties, data=0.5 * split.penalties.data)
     balance.repenalise(split, state, NumpyBackend("float64"), new)
-    assert state.window_dual is None
+    assert state.margin_band is None
     split.c_step(state)
-    assert np.abs(state.window_dual - direct_window_dual(split, state)).max() < 1e-10 * np.abs(direct_window_dual(
+    assert np.abs(state.margin_band - direct_margin_band(split, state)).max() < 1e-10 * np.abs(direct_margin_band(
         split, state)).max()
 
 

@@ -566,25 +566,15 @@ def test_admm_band_solve_matches_numpy_on_one_and_two_bands(dtype, n_bands, path
     assert_band_solves_match(pair, random_states(pair, backend)[2], backend, 2e-6 if dtype == "float32" else 1e-12)
 
 
-@pytest.fixture
-def without_margin(monkeypatch):
-    """The host's ADMM without the margin's correction, which the kernels do not take yet (docs/convergence.md, "The
-    margin's correction built"): the same iteration on both."""
-    from clsdcam.algorithms.admm import algorithm
-
-    monkeypatch.setattr(algorithm, "MARGIN_STEPS", 0)
-
-
-def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_memory, without_margin):
-    """float32 ADMM (TV and L1) on a simulated scene, every new device array starting as NaN (a GPU's garbage): the
-    cube agrees with NumPy's (its steps without the margin's correction) to 1e-4 (relative L2) after as many
-    iterations as FISTA's test."""
+def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_memory):
+    """float32 ADMM (TV and L1, the margin's correction on) on a simulated scene, every new device array starting as
+    NaN (a GPU's garbage): the cube agrees with NumPy's to 1e-4 (relative L2) after as many iterations as FISTA's
+    test."""
     priors = {"algorithm": "admm", "tv": 3e-3, "l1": 1e-3}
     assert_reconstructs(simulation, priors, new_backend("float32", engine), RECONSTRUCTION[cl_tiny][2])
 
 
-def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(simulation, engine, cl_tiny,
-                                                                               without_margin):
+def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(simulation, engine, cl_tiny):
     """A second frame (half as bright) resumes from the first's splits and duals, rescaled on the device: its cube
     matches NumPy's second frame to 1e-4 (relative L2), and the device's upload of the terms is made once."""
     from clsdcam import Settings, Solver
@@ -603,3 +593,49 @@ def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(s
     assert set(uploaded[2]) == {"filters", "transfer", "gain", "data transfer", "pivots"}
     assert all(uploaded[3][name] is array for name, array in uploaded[2].items())    # the same device arrays
     assert np.linalg.norm(cubes[1] - cubes[0]) / np.linalg.norm(cubes[0]) <= 1e-4
+
+
+@pytest.mark.parametrize("rows", [slice(0, 4), slice(6, 10), slice(9, 10)])
+def test_block_reads_and_writes_match_numpy(rows, path):
+    """A rectangle of every plane (the margin's band of a spectrum: rows from the top, the bottom, one row) read
+    from the device and written back as NumPy reads and writes it, the rest of the array untouched."""
+    backend, rng = opencl("float32", PATH_BACKEND[path]), np.random.default_rng(8)
+    host = (rng.standard_normal((3, 10, 7)) + 1j * rng.standard_normal((3, 10, 7))).astype(np.complex64)
+    device = backend.to_device(host, complex_=True)
+    assert np.array_equal(backend.read_block(device, rows, 4), NumpyBackend("float32").read_block(host, rows, 4))
+    block = (rng.standard_normal((3, rows.stop - rows.start, 5)) + 1j).astype(np.complex64)
+    backend.write_block(device, rows, block)
+    NumpyBackend("float32").write_block(host, rows, block)
+    assert np.array_equal(backend.to_host(device), host)
+
+
+def test_admm_kernels_track_the_margins_band_of_the_x_steps_relaxed_point(engine):
+    """The margin's correction on the kernels (clsdcam/algorithms/admm/margin.py): after each of 12 relaxed
+    iterations' c-step, the tracked band Q is the band of rfft2(αHv + (1 − α)x + ξ), the x-step's relaxed point, to
+    float32's rounding (2e-6 of its largest coefficient, the recursion's rounding decaying by (2 − α)/2 an
+    iteration); new data penalties start it again from ξ, and it goes on matching."""
+    from clsdcam.algorithms.admm.balance import repenalise
+
+    backend = new_backend("float32", engine)
+    split = admm_pair("float32", backend, n_bands=3)[1]
+    assert split.margin is not None and split.relaxation != 1
+    state, _ = split.start(backend.to_device(np.random.default_rng(9).random(split.shape)))
+    for iteration in range(12):
+        if iteration == 6:
+            repenalise(split, state, backend, replace(split.penalties, data=2 * split.penalties.data))
+            assert state.margin_band is None
+        split.c_step(state)
+        assert relative_peak_error(state.margin_band, relaxed_point_band(split, state, backend)) <= 2e-6
+        split.splits(state, split.relaxation)
+
+
+def relaxed_point_band(split, state, backend) -> np.ndarray:
+    """The margin's band of rfft2(αHv + (1 − α)x + ξ) after a c-step on the kernels, from the device's arrays."""
+    alpha, (h, w) = split.relaxation, split.sensor_shape
+    point = alpha * backend.to_host(state.hv).astype(np.float64) + (1 - alpha) * backend.to_host(state.x)
+    point[:, :h, :w] += backend.to_host(state.xi)
+    return split.margin.band.take(np.fft.rfft2(point))
+
+
+def relative_peak_error(got, want) -> float:
+    return float(np.abs(got - want).max() / np.abs(want).max())

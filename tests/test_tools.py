@@ -668,14 +668,14 @@ def test_bench_road_splits_the_road_left_into_orthogonal_parts(tmp_path, capsys,
 
 
 def test_bench_answer_replays_the_default_stop_where_the_default_stops(tmp_path, capsys, monkeypatch):
-    """On a two-scene panel at 32×40×8, with the cap at 1080 (a window's end): a two-point scene, point-like with a
+    """On a two-scene panel at 32×40×8, with the cap at 830 (a window's end): a two-point scene, point-like with a
     few lit voxels, whose narrowed stop runs to the cap, and a sixteen-source scene, not point-like at this size,
     whose widened stop converges before it. On each the replayed stop at the default's own tolerance ends where a
     default solve of the scene ends, with its cube's PSNR (and the probe's noise); the answer is the last mark;
     "needs" is the widest grid tolerance whose stop is within; the cap ends a stop whose estimate falls only after
     it; a trajectory too short to read the drift is refused."""
     for module in (settings, bench_answer):
-        monkeypatch.setattr(module, "AUTO_CAP", 1080)
+        monkeypatch.setattr(module, "AUTO_CAP", 830)
     args = ["--size", "32x40", "--bands", "8", "--scenes", "2", "--kinds", "points,sources", "--seed", "5",
             "--iters", "1100", "--tolerances", "1e9", "--out", str(tmp_path)]
     bench_answer.main(args)
@@ -694,10 +694,10 @@ def test_bench_answer_replays_the_default_stop_where_the_default_stops(tmp_path,
         assert needs["within"] and all(not bench_answer.stop(marks, scene["answer"], t)["within"]
                                        for t in bench_answer.GRID if t > needs["tolerance"])
     assert sum(s["default"]["converged"] for s in results["scenes"]) >= 1
-    late = [{"iteration": k, "psnr": 9.0, "angle": 1.0, "estimate": e} for k, e in ((1060, 0.5), (1080, 0.5), (1085, 0.1))]
+    late = [{"iteration": k, "psnr": 9.0, "angle": 1.0, "estimate": e} for k, e in ((810, 0.5), (830, 0.5), (835, 0.1))]
     capped = bench_answer.stop(late, {"psnr": 9.0, "angle": 1.0}, 0.2)      # a reading past the cap is not read
-    assert (capped["iteration"], capped["converged"]) == (1080, False)
-    assert bench_answer.stop_cell(capped) == "1080 (cap): +0.00 dB / +0.00°"
+    assert (capped["iteration"], capped["converged"]) == (830, False)
+    assert bench_answer.stop_cell(capped) == "830 (cap): +0.00 dB / +0.00°"
     assert "| 1 | sources, standard |" in capsys.readouterr().out and (tmp_path / "answer.png").stat().st_size > 0
     with pytest.raises(SystemExit) as refused:
         bench_answer.main([*args[:-5], "1000", "--out", str(tmp_path / "short")])

@@ -61,9 +61,9 @@ NONNEG_FEW_POINTS = 1e-3
 # 0.015 two of five ended 0.27–0.30 dB short of their answer); unhalved, nine of them stop 5 % sooner at 0.01, all
 # within (docs/convergence.md, "A wider stop for a few points in good light")
 LIGHTER_FEW_POINTS = 0.5
-# conjugate-gradient steps of the margin's correction in each c-step on the host (0: none; margin.py, and
-# docs/convergence.md, "The margin's correction built"): 10 measured best; off until the kernels take it
-MARGIN_STEPS = 0
+# conjugate-gradient steps of the margin's correction in each c-step (0: none; margin.py, and docs/convergence.md,
+# "The margin's correction built"): 10 measured best of 0, 3 and 10
+MARGIN_STEPS = 10
 BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis after this many iterations (balance.py)
 # mean/peak of the iterate at AUTO_AT below which --tv auto takes a scene as point-like: 0.0005–0.0013 on five 128×160×64
 # panels' lines scenes, 0.0035–0.21 on their other 80 (docs/convergence.md, "A lighter weight for point-like scenes")
@@ -114,7 +114,7 @@ def band_steps(problem) -> "SplittingBase":
     if isinstance(backend, Programs):
         from .kernel_steps import KernelSplitting
 
-        return KernelSplitting(model, problem.b, terms, tv, l1, RELAXATION)
+        return KernelSplitting(model, problem.b, terms, tv, l1, RELAXATION, MARGIN_STEPS)
     return host_steps()(model, backend.to_host(problem.b), terms, tv, l1, backend.workers, RELAXATION, MARGIN_STEPS)
 
 
@@ -242,4 +242,5 @@ class Admm(Algorithm):
         if not isinstance(state, Penalties):
             for array in state.arrays():
                 self.backend.scale(factor, array, out=array)
+            state.margin_band = None         # the margin's correction starts its band again (margin.py)
         self._resumed = state

@@ -105,7 +105,7 @@ def repenalise(split: SplittingBase, state: SplitState, backend, new: Penalties)
         window = backend.pad(state.xi, state.hv.shape[-2:], (0, 0))     # the field's, or the window's on the host
         backend.axpy(1.0 - keep, window, state.hv, out=state.hv)
         backend.scale(keep, state.xi, out=state.xi)
-        state.window_dual = None                  # the margin's correction transforms ξ again (host_steps)
+        state.margin_band = None                  # the margin's correction starts its band again (margin.py)
     ratios = {axis: old.tv_along(axis) / new.tv_along(axis) for axis in split.axes}
     if any(ratio != 1.0 for ratio in ratios.values()):
         split.rescale_tv_duals(state, ratios)

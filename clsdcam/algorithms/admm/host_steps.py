@@ -17,7 +17,7 @@ import numpy as np
 import scipy.fft
 
 from ...backends import irfft2, irfft2_to_window, map_blocks, rfft2_of_window, scratch_buffer
-from .margin import MarginCorrection
+from .margin import margin_correction
 from .terms import CalibrationTerms, SplitState, SplittingBase, sweep_bands
 
 FFT_CHUNK_BYTES = 4 << 20     # spectrum bytes per chunk of bands in the transforms (host_convolution's)
@@ -96,9 +96,8 @@ class Splitting(SplittingBase):
 
     def __init__(self, model, b: np.ndarray, terms: CalibrationTerms, tv=None, l1=None, workers: int = 1,
                  relaxation: float = 1.0, margin_steps: int = 0):
-        super().__init__(model, terms, tv, l1, relaxation)
-        self.workers, self.margin_steps = workers, margin_steps
-        self.margin: MarginCorrection | None = None
+        super().__init__(model, terms, tv, l1, relaxation, margin_steps)
+        self.workers = workers
         self.b = np.asarray(b, self.dtype)
         self.filters, self.transfer = terms.filters, terms.transfer
         self.chunk = max(1, FFT_CHUNK_BYTES // (self.field_shape[0] * (self.field_shape[1] // 2 + 1) *
@@ -107,7 +106,7 @@ class Splitting(SplittingBase):
     def set_penalties(self, penalties):
         """The penalties, what depends on them, and the margin's correction of them (``margin_steps`` > 0)."""
         super().set_penalties(penalties)
-        self.margin = MarginCorrection(self, self.margin_steps) if self.margin_steps > 0 else None
+        self.margin = margin_correction(self)
 
     # ---- the state -----------------------------------------------------------------------------------------
     def start(self, v0: np.ndarray) -> tuple[SplitState, float]:
@@ -318,7 +317,7 @@ class Splitting(SplittingBase):
         nothing left in ``hv``."""
         h, w = self.sensor_shape
         state.xi[...] = xi
-        state.window_dual = None
+        state.margin_band = None
         state.x[...] = x[:, :h, :w]
         y = np.array(x, self.dtype)
         y[:, :h, :w] -= state.xi

@@ -8,9 +8,12 @@
 * the c-step is the TV adjoint (one kernel), the backend's transforms (2K forward, 2K inverse), and between them
   one kernel that forms the right-hand side in Fourier, solves the tridiagonal system along λ at each Fourier
   coefficient by Thomas's sweeps and writes Ĥ·v̂ beside v̂ (admm_band_solve: v̂'s spectrum read and written twice,
-  the other once).
+  the other once); with the margin's correction (:mod:`.margin`), the band of the data split's spectrum read
+  before that kernel, v̂'s after it, and v̂'s and Ĥv̂'s corrected bands written back, the correction worked out on
+  the host.
 
-Two scalar reads an iteration (the two reductions); the calibration's and the penalties' terms are uploaded once
+Two scalar reads an iteration (the two reductions), and the margin's band (four rectangles each way); the
+calibration's and the penalties' terms are uploaded once
 per solver (``CalibrationTerms.on_device``).
 """
 from __future__ import annotations
@@ -18,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...backends.base import ints, total
+from .margin import margin_correction
 from .terms import CalibrationTerms, SplitState, SplittingBase
 
 
@@ -25,9 +29,11 @@ class KernelSplitting(SplittingBase):
     """ADMM's steps for one band-space problem on a backend with programs (the module docstring); ``b`` the
     normalised measurement on the device."""
 
-    def __init__(self, model, b, terms: CalibrationTerms, tv=None, l1=None, relaxation: float = 1.0):
-        super().__init__(model, terms, tv, l1, relaxation)
+    def __init__(self, model, b, terms: CalibrationTerms, tv=None, l1=None, relaxation: float = 1.0,
+                 margin_steps: int = 0):
+        super().__init__(model, terms, tv, l1, relaxation, margin_steps)
         self.backend = model.backend
+        self.workers = self.backend.workers         # the margin's host transforms
         self.kernels = self.backend.kernels
         self.b = b
         self.filters = terms.on_device(self.backend, "filters", terms.filters)
@@ -35,8 +41,9 @@ class KernelSplitting(SplittingBase):
         self.mask = np.int32(sum(1 << axis for axis in self.axes))
 
     def set_penalties(self, penalties):
-        """The penalties, and their terms on the device."""
+        """The penalties, the margin's correction of them (from the host terms), and their terms on the device."""
         super().set_penalties(penalties)
+        self.margin = margin_correction(self)
         be, terms = self.backend, self.terms
         self._gain = terms.on_device(be, "gain", self._gain)
         self._data_transfer = terms.on_device(be, "data transfer", self._data_transfer, complex_=True)
@@ -61,13 +68,17 @@ class KernelSplitting(SplittingBase):
 
     # ---- one iteration -------------------------------------------------------------------------------------
     def c_step(self, state: SplitState) -> None:
-        """v and Hv from the right-hand side the last splits left (x − ξ in ``hv``, the rest in ``rest``)."""
+        """v and Hv from the right-hand side the last splits left (x − ξ in ``hv``, the rest in ``rest``), with the
+        margin's correction on their band before the inverse transforms."""
         be = self.backend
         self._add_tv_adjoint(state)
         data, rest = state.spectra
         be.fft2(state.hv, out=data)
         be.fft2(state.rest, out=rest)
+        split = self._margin_split(state, data) if self.margin else None
         self._band_solve(data, rest)
+        if self.margin:
+            self._correct_margin(state, data, rest, split)
         be.ifft2(data, self.field_shape, out=state.v)
         be.ifft2(rest, self.field_shape, out=state.hv)
 
@@ -109,6 +120,23 @@ class KernelSplitting(SplittingBase):
         plane = data.shape[1] * data.shape[2]
         self.kernels.grid1("admm_band_solve", plane, data, rest, self._data_transfer, self.transfer, self._pivots,
                            self._real(self.coupling), np.int32(self.n_bands), np.int64(plane))
+
+    def _margin_split(self, state: SplitState, data) -> tuple:
+        """(x̂⁺, Ξ⁺) on the margin's band, from the band of ``data`` = rfft2(x⁺ − ξ⁺) (``MarginCorrection.field_split``;
+        ξ downloaded where the band starts again)."""
+        fresh = self.margin.band.read(self.backend, data)
+        return self.margin.field_split(state, fresh, lambda: self.backend.to_host(state.xi))
+
+    def _correct_margin(self, state: SplitState, data, rest, split: tuple) -> None:
+        """v̂ ← v̂₀ + δ̂ in ``data`` and Ĥv̂ in ``rest`` on the margin's band (the x-step relaxes Hv itself), δ̂ from
+        v̂₀'s band read back and x̂⁺'s; and the next x-step's relaxed point's band Q tracked in the state."""
+        margin, band = self.margin, self.margin.band
+        solved = band.read(self.backend, data)
+        solved += margin.correction(solved, split[0])
+        hv = margin.transfer * solved
+        band.write(self.backend, data, solved)
+        band.write(self.backend, rest, hv)
+        state.margin_band = margin.relaxed_point(hv, *split)
 
     def _convolve(self, v, spectrum, out):
         """Hv = irfft2(Ĥ·rfft2(v)) into ``out`` (2K transforms), ``spectrum`` its scratch."""

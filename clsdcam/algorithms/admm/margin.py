@@ -29,8 +29,18 @@ spectrum (its window zero-padded), tracked from the window transform the c-step 
     Ξ⁺ = ((2 − α)Ξ − rfft2(hv)) / 2,
 
 a recursion whose rounding decays by (2 − α)/2 an iteration; it starts from a pruned transform of ξ wherever
-anything but the splits set ξ (``SplitState.window_dual`` None). The correction adds to the band of v̂ and Ŷ, before
+anything but the splits set ξ (``SplitState.margin_band`` None). The correction adds to the band of v̂ and Ŷ, before
 the c-step's inverse transforms: it costs no field transform.
+
+On the kernels (:class:`~.kernel_steps.KernelSplitting`) the x-step leaves x⁺ − ξ⁺ in ``hv`` over the whole field,
+from its relaxed point q = αHv + (1 − α)x + ξ (ξ = 0 outside the window): hv⁺ = q − 2ξ⁺ everywhere. So the band of
+rfft2(hv), D, and the band Q of q's spectrum give
+
+    Ξ⁺ = (Q − D) / 2,   x̂⁺ = D + Ξ⁺,   and the next   Q⁺ = αĤv̂ + (1 − α)x̂⁺ + Ξ⁺   (v̂ corrected),
+
+the same decay of rounding. The kernels track Q (``SplitState.margin_band``), and read the band of D and of v̂₀ from
+the device and write v̂'s and Ĥv̂'s back (four rectangles each way, 4 × 150 coefficients a band), the correction's
+arithmetic on the host: the x-step relaxes Hv itself, so Ĥv̂ is written unrelaxed.
 
 Exact. At a fixed point of the corrected iteration x = Hv over the field, so Hv₀ − x = −Hδ and r₀ is linear in δ:
 δ = 0 there, and the fixed point is the plain c-step's, the problem's minimiser, whatever the band.
@@ -63,6 +73,8 @@ class Band:
         by, bx = min(band[0], hp // 2), min(band[1], wp // 2)
         self.rows, self.columns = np.arange(1 - by, by), bx
         self._field_rows = self.rows % hp
+        runs = (slice(hp + 1 - by, hp), slice(0, by))        # the field's rows of k_y < 0, then of k_y ≥ 0
+        self._runs = [rows for rows in runs if rows.stop > rows.start]
         self._mask_y = window_mask_matrix(self.rows.astype(float), hp, h).astype(dtype)
         self._mask_x = window_mask_matrix(np.arange(1 - bx, bx).astype(float), wp, w).T.astype(dtype)
 
@@ -70,9 +82,31 @@ class Band:
         """The band of ``spectrum`` (a copy)."""
         return spectrum[..., self._field_rows, :self.columns]
 
+    def read(self, backend, spectrum) -> np.ndarray:
+        """The band of a ``backend``'s ``spectrum``, its rows k_y < 0 then k_y ≥ 0 read as two rectangles."""
+        return np.concatenate([backend.read_block(spectrum, rows, self.columns) for rows in self._runs], axis=-2)
+
+    def write(self, backend, spectrum, band: np.ndarray) -> None:
+        """The band of a ``backend``'s ``spectrum`` set to ``band`` (two rectangles, as :meth:`read`)."""
+        start = 0
+        for rows in self._runs:
+            count = rows.stop - rows.start
+            backend.write_block(spectrum, rows, band[..., start:start + count, :])
+            start += count
+
     def add(self, spectrum: np.ndarray, band: np.ndarray) -> None:
         """spectrum += ``band`` zero-padded to the field's half spectrum, in place."""
         spectrum[..., self._field_rows, :self.columns] += band
+
+    def real(self, z: np.ndarray) -> np.ndarray:
+        """z with its column k_x = 0 made Hermitian along k_y, (z_k + conj z_−k)/2, in place: the band of a real
+        field's spectrum. An inverse real transform drops the rest, so a correction must not carry it: on the kernels
+        the next c-step's band is tracked from the corrected Ĥv̂, and a part the field never had, fed back through the
+        correction, grew ×100 an iteration."""
+        column = z[..., :, 0]
+        column += np.conj(column[..., ::-1])
+        column *= column.real.dtype.type(0.5)
+        return z
 
     def masked(self, z: np.ndarray) -> np.ndarray:
         """T·z on the band: z's columns k_x < 0 from Hermitian symmetry (ẑ_{−k} = conj ẑ_k), T_y z T_xᵀ, then its
@@ -81,17 +115,23 @@ class Band:
         return (self._mask_y @ whole @ self._mask_x)[..., self.columns - 1:]
 
 
+def margin_correction(split) -> "MarginCorrection | None":
+    """The correction of ``split``'s penalties, built from its host terms (None with no ``margin_steps``)."""
+    return MarginCorrection(split, split.margin_steps) if split.margin_steps > 0 else None
+
+
 class MarginCorrection:
     """ΠAΠ and P⁻¹ of one splitting's penalties on the band, and the correction they make (the module docstring);
-    built again for new penalties (``Splitting.set_penalties``)."""
+    built again for new penalties (each splitting's ``set_penalties``, before its terms go to a device)."""
 
     def __init__(self, split, steps: int, band=BAND):
         p, axes, k = split.penalties, split.axes, split.n_bands
         self.steps, self.relaxation, self.workers = int(steps), split.relaxation, split.workers
         self.field_shape, self.band = split.field_shape, Band(split.field_shape, split.sensor_shape, band, split.cdtype)
         real = split.dtype.type
-        self.transfer, self.data_transfer = self.band.take(split.transfer), self.band.take(split._data_transfer)
-        self.pivots = self.band.take(split._pivots)                 # the c-step's own, of the same penalties
+        self.transfer = self.band.take(split.terms.transfer)
+        self.data_transfer = self.band.take(split._data_transfer)   # the c-step's own host terms, of the same penalties
+        self.pivots = self.band.take(split._pivots)
         diagonal = self.band.take(band_diagonal(p, axes, split.terms.transfer_power, split.field_shape))
         self.coupling = real(band_coupling(p, axes))
         self.diagonal = (diagonal + float(self.coupling) * band_degrees(k)[:, None, None]).astype(split.dtype)
@@ -101,29 +141,54 @@ class MarginCorrection:
 
     # ---- the data split's band -----------------------------------------------------------------------------
     def data_split(self, state, change: np.ndarray) -> np.ndarray:
-        """x̂'s band, Ŷ + rfft2(hv) + Ξ (``change`` = rfft2(hv), not yet added to Ŷ), Ξ tracked in
-        ``state.window_dual`` (the module docstring)."""
+        """x̂'s band on the host, Ŷ + rfft2(hv) + Ξ (``change`` = rfft2(hv), not yet added to Ŷ), Ξ tracked in
+        ``state.margin_band`` (the module docstring)."""
         fresh = self.band.take(change)
-        if state.window_dual is None:
-            state.window_dual = self.band.take(rfft2_of_window(state.xi, self.field_shape, self.workers))
+        if state.margin_band is None:
+            state.margin_band = self._dual_band(state.xi)
         else:
-            state.window_dual *= state.window_dual.real.dtype.type((2 - self.relaxation) / 2)
-            state.window_dual -= fresh / 2
+            state.margin_band *= state.margin_band.real.dtype.type((2 - self.relaxation) / 2)
+            state.margin_band -= fresh / 2
         fresh += self.band.take(state.data_spectrum)
-        fresh += state.window_dual
+        fresh += state.margin_band
         return fresh
+
+    def field_split(self, state, fresh: np.ndarray, window_dual) -> tuple[np.ndarray, np.ndarray]:
+        """(x̂⁺, Ξ⁺) on the band on the kernels, from D = ``fresh`` (the band of rfft2(hv), hv = x⁺ − ξ⁺ over the
+        field) and the tracked Q (``state.margin_band``): Ξ⁺ = (Q − D)/2; where Q is None, Ξ⁺ transformed from ξ
+        (``window_dual()``, ξ on the host). x̂⁺ = D + Ξ⁺ (the module docstring)."""
+        if state.margin_band is None:
+            dual = self._dual_band(window_dual())
+        else:
+            dual = state.margin_band - fresh
+            dual *= dual.real.dtype.type(0.5)
+        return fresh + dual, dual
+
+    def relaxed_point(self, hv: np.ndarray, split: np.ndarray, dual: np.ndarray) -> np.ndarray:
+        """Q = αĤv̂ + (1 − α)x̂ + Ξ on the band: the band of the next x-step's relaxed point on the kernels."""
+        real = hv.real.dtype.type
+        return real(self.relaxation) * hv + real(1 - self.relaxation) * split + dual
+
+    def _dual_band(self, xi: np.ndarray) -> np.ndarray:
+        """Ξ: the band of ξ's spectrum, its window zero-padded (a pruned transform)."""
+        return self.band.take(rfft2_of_window(np.asarray(xi), self.field_shape, self.workers))
 
     # ---- the correction ------------------------------------------------------------------------------------
     def correct(self, solved: np.ndarray, relaxed: tuple, data_split: np.ndarray) -> None:
-        """v̂ (``solved``) += δ̂, and each of the ``relaxed`` spectra (Ŷ and its copy) += αĤδ̂, from v̂₀ = ``solved``
-        and x̂'s band ``data_split`` (:meth:`data_split`)."""
-        apart = self.transfer * self.band.take(solved) - data_split                # Ĥv̂₀ − x̂
-        delta = self._solve(self._pulled(apart))
+        """On the host: v̂ (``solved``) += δ̂, and each of the ``relaxed`` spectra (Ŷ and its copy) += αĤδ̂, from v̂₀ =
+        ``solved`` and x̂'s band ``data_split`` (:meth:`data_split`)."""
+        delta = self.correction(self.band.take(solved), data_split)
         self.band.add(solved, delta)
         delta *= self.transfer
         delta *= delta.real.dtype.type(self.relaxation)
         for spectrum in relaxed:
             self.band.add(spectrum, delta)
+
+    def correction(self, solved: np.ndarray, data_split: np.ndarray) -> np.ndarray:
+        """δ̂ on the band from v̂₀'s band ``solved`` and x̂'s ``data_split``: ``steps`` P⁻¹-preconditioned conjugate
+        gradients on ΠAΠ·δ̂ = μ₁Ĥ*(I − T)(Ĥv̂₀ − x̂), the masked system's residual r₀ on the band; its column k_x = 0
+        then made Hermitian along k_y (:meth:`Band.real`)."""
+        return self.band.real(self._solve(self._pulled(self.transfer * solved - data_split)))
 
     def _pulled(self, z: np.ndarray) -> np.ndarray:
         """μ₁Ĥ*(I − T)·z on the band."""

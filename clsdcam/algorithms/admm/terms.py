@@ -41,8 +41,9 @@ class SplitState:
     with them). The host's steps keep the data split on the sensor window (:class:`~.host_steps.Splitting`): x and ξ
     there, x − ξ over the field as its spectrum ``data_spectrum`` (None on the kernels), and in ``hv`` the window of
     its relaxed point after the c-step, the window's change to it after the splits; with the margin's correction
-    (:mod:`.margin`), ``window_dual`` the low band of ξ's spectrum it tracks (None where anything but the splits set
-    ξ, and on the kernels)."""
+    (:mod:`.margin`), ``margin_band`` what it tracks on the field's lowest frequencies: the band of ξ's spectrum on
+    the host, of the x-step's relaxed point's on the kernels (None where anything but the splits set ξ; a host array,
+    not among :meth:`arrays`)."""
 
     v: np.ndarray
     hv: np.ndarray
@@ -56,11 +57,11 @@ class SplitState:
     spectra: tuple
     penalties: Penalties | None = None
     data_spectrum: object = None
-    window_dual: object = None
+    margin_band: object = None
 
     def arrays(self) -> list:
         """Every array of the state but the c-step's spectra (what a resumed solve scales into its units)."""
-        kept = (getattr(self, f.name) for f in fields(self) if f.name not in ("spectra", "penalties"))
+        kept = (getattr(self, f.name) for f in fields(self) if f.name not in ("spectra", "penalties", "margin_band"))
         return [array for array in kept if array is not None]
 
     def moved(self) -> Penalties | None:
@@ -188,12 +189,15 @@ class SplittingBase:
     :class:`CalibrationTerms`; ``tv`` the :class:`~clsdcam.solve.priors.TotalVariation` prior or None, ``l1`` the
     :class:`~clsdcam.solve.priors.Sparsity` prior or None (their weights are read at every step: an automatic weight
     chosen mid-solve takes effect at once); ``relaxation`` α, each split's over-relaxation (the module docstring of
-    :mod:`clsdcam.algorithms.admm`; 1: none). A backend's steps (:class:`Splitting` on NumPy,
+    :mod:`clsdcam.algorithms.admm`; 1: none); ``margin_steps`` the conjugate-gradient steps of the margin's
+    correction (:mod:`.margin`; 0: none). A backend's steps (:class:`Splitting` on NumPy,
     :class:`~clsdcam.algorithms.admm.kernel_steps.KernelSplitting` with programs) add ``start``, ``c_step`` and ``splits``."""
 
-    def __init__(self, model, terms: CalibrationTerms, tv=None, l1=None, relaxation: float = 1.0):
+    def __init__(self, model, terms: CalibrationTerms, tv=None, l1=None, relaxation: float = 1.0,
+                 margin_steps: int = 0):
         self.terms = terms
-        self.relaxation = relaxation
+        self.relaxation, self.margin_steps = relaxation, margin_steps
+        self.margin = None           # the margin's correction of the penalties (a subclass's set_penalties)
         self.dtype, self.cdtype = terms.dtype, terms.cdtype
         self.field_shape = model.field_shape
         self.sensor_shape = model.sensor_shape
