@@ -15,7 +15,8 @@ BACKENDS = ("auto", "numpy", "opencl")
 EXPORTS = {   # name -> the module of this package that defines it, imported when the name is first used
     **dict.fromkeys(("NumpyBackend",), "numpy"),
     **dict.fromkeys(("OpenCLBackend",), "opencl"),
-    **dict.fromkeys(("map_blocks", "scratch_buffer", "THREADS_VARIABLE", "available_cores", "host_threads"), "blocks"),
+    **dict.fromkeys(("map_blocks", "scratch_buffer", "THREADS_VARIABLE", "available_cores", "host_threads",
+                     "single_threaded_blas"), "blocks"),
     **dict.fromkeys(("seen_bands",), "host_convolution"),
     **dict.fromkeys(("irfft2", "irfft2_to_window", "rfft2_of_window"), "host_fft"),
     **dict.fromkeys(("CASES", "Inputs", "benchmarks"), "cases"),

@@ -48,9 +48,10 @@ Exact. At a fixed point of the corrected iteration x = Hv over the field, so Hv�
 from __future__ import annotations
 
 import numpy as np
+import scipy.fft
 
-from ...backends import rfft2_of_window
-from .terms import band_coupling, band_degrees, band_diagonal, sweep_bands
+from ...backends import rfft2_of_window, single_threaded_blas
+from .terms import band_coupling, band_diagonal
 
 BAND = (8, 10)     # the correction's frequencies |k_y| < 8, |k_x| < 10 cycles over the field (fewer on a small one)
 
@@ -76,7 +77,7 @@ class Band:
         runs = (slice(hp + 1 - by, hp), slice(0, by))        # the field's rows of k_y < 0, then of k_y ≥ 0
         self._runs = [rows for rows in runs if rows.stop > rows.start]
         self._mask_y = window_mask_matrix(self.rows.astype(float), hp, h).astype(dtype)
-        self._mask_x = window_mask_matrix(np.arange(1 - bx, bx).astype(float), wp, w).T.astype(dtype)
+        self._mask_x = window_mask_matrix(np.arange(1 - bx, bx).astype(float), wp, w).T[:, bx - 1:].astype(dtype)
 
     def take(self, spectrum: np.ndarray) -> np.ndarray:
         """The band of ``spectrum`` (a copy)."""
@@ -109,10 +110,19 @@ class Band:
         return z
 
     def masked(self, z: np.ndarray) -> np.ndarray:
-        """T·z on the band: z's columns k_x < 0 from Hermitian symmetry (ẑ_{−k} = conj ẑ_k), T_y z T_xᵀ, then its
-        columns k_x ≥ 0."""
+        """T·z on the band (z of shape (K, rows, columns)): z's columns k_x < 0 from Hermitian symmetry (ẑ_{−k} =
+        conj ẑ_k), then T_y z T_xᵀ's columns k_x ≥ 0, as two matrix products over every band at once."""
         whole = np.concatenate([np.conj(z[..., ::-1, :0:-1]), z], axis=-1)
-        return (self._mask_y @ whole @ self._mask_x)[..., self.columns - 1:]
+        k, rows, width = whole.shape
+        across = (whole.reshape(k * rows, width) @ self._mask_x).reshape(k, rows, self.columns)
+        down = self._mask_y @ across.transpose(1, 0, 2).reshape(rows, k * self.columns)
+        return down.reshape(rows, k, self.columns).transpose(1, 0, 2)
+
+
+def path_eigenvalues(n_bands: int) -> np.ndarray:
+    """The eigenvalues 2 − 2cos(πj/K), j = 0…K − 1, of D_λᵀD_λ (:func:`~.terms.band_degrees` its diagonal, −1 its
+    off-diagonals), whose eigenvectors are the DCT-II's."""
+    return 2 - 2 * np.cos(np.pi * np.arange(n_bands) / n_bands)
 
 
 def margin_correction(split) -> "MarginCorrection | None":
@@ -128,16 +138,13 @@ class MarginCorrection:
         p, axes, k = split.penalties, split.axes, split.n_bands
         self.steps, self.relaxation, self.workers = int(steps), split.relaxation, split.workers
         self.field_shape, self.band = split.field_shape, Band(split.field_shape, split.sensor_shape, band, split.cdtype)
-        real = split.dtype.type
         self.transfer = self.band.take(split.terms.transfer)
         self.data_transfer = self.band.take(split._data_transfer)   # the c-step's own host terms, of the same penalties
-        self.pivots = self.band.take(split._pivots)
         diagonal = self.band.take(band_diagonal(p, axes, split.terms.transfer_power, split.field_shape))
-        self.coupling = real(band_coupling(p, axes))
-        self.diagonal = (diagonal + float(self.coupling) * band_degrees(k)[:, None, None]).astype(split.dtype)
+        modes = diagonal + band_coupling(p, axes) * path_eigenvalues(k)[:, None, None]     # P in the modes
+        self.diagonal, self.inverse = modes.astype(split.dtype), (1 / modes).astype(split.dtype)
         self.weights = np.full(self.band.columns, 2.0, split.dtype)
         self.weights[0] = 1.0
-        self._scratch: dict = {}
 
     # ---- the data split's band -----------------------------------------------------------------------------
     def data_split(self, state, change: np.ndarray) -> np.ndarray:
@@ -187,32 +194,43 @@ class MarginCorrection:
     def correction(self, solved: np.ndarray, data_split: np.ndarray) -> np.ndarray:
         """δ̂ on the band from v̂₀'s band ``solved`` and x̂'s ``data_split``: ``steps`` P⁻¹-preconditioned conjugate
         gradients on ΠAΠ·δ̂ = μ₁Ĥ*(I − T)(Ĥv̂₀ − x̂), the masked system's residual r₀ on the band; its column k_x = 0
-        then made Hermitian along k_y (:meth:`Band.real`)."""
-        return self.band.real(self._solve(self._pulled(self.transfer * solved - data_split)))
+        then made Hermitian along k_y (:meth:`Band.real`). Worked in the modes along λ (:meth:`_modes`), and BLAS
+        on one thread: its products are small (a threaded OpenBLAS took 10× as long on a busy machine)."""
+        with single_threaded_blas():
+            apart = self._modes(self.transfer * solved - data_split)
+            return self.band.real(self._bands(self._solve(self._pulled(apart))))
+
+    def _modes(self, z: np.ndarray) -> np.ndarray:
+        """z along λ in the orthonormal DCT-II's modes. D_λᵀD_λ (the path's Laplacian, its ends free) is diagonal
+        there (:func:`path_eigenvalues`), and so is P = a + e·D_λᵀD_λ at each coefficient, where in the bands it is
+        tridiagonal; Ĥ, μ₁Ĥ* and T act alike on every band, so they commute with the transform, and it keeps the
+        inner product: the conjugate gradients run there unchanged, P⁻¹ a product."""
+        return scipy.fft.dct(z, type=2, axis=0, norm="ortho", workers=self.workers)
+
+    def _bands(self, z: np.ndarray) -> np.ndarray:
+        """:meth:`_modes` undone (``z`` spent)."""
+        return scipy.fft.idct(z, type=2, axis=0, norm="ortho", overwrite_x=True, workers=self.workers)
 
     def _pulled(self, z: np.ndarray) -> np.ndarray:
         """μ₁Ĥ*(I − T)·z on the band."""
         return self.data_transfer * (z - self.band.masked(z))
 
     def _apply(self, v: np.ndarray) -> np.ndarray:
-        """ΠAΠ·v̂ = P·v̂ − μ₁Ĥ*(I − T)Ĥ·v̂ (P tridiagonal along λ at each coefficient)."""
+        """ΠAΠ·v̂ = P·v̂ − μ₁Ĥ*(I − T)Ĥ·v̂ in the modes (P diagonal there)."""
         out = self.diagonal * v
-        if self.coupling:
-            out[1:] -= self.coupling * v[:-1]
-            out[:-1] -= self.coupling * v[1:]
         out -= self._pulled(self.transfer * v)
         return out
 
     def _precondition(self, r: np.ndarray) -> np.ndarray:
-        """P⁻¹·r̂ by the c-step's own Thomas sweeps along λ."""
-        return sweep_bands(r.copy(), self.pivots, self.coupling, self._scratch)
+        """P⁻¹·r̂ in the modes."""
+        return r * self.inverse
 
     def _dot(self, a: np.ndarray, b: np.ndarray) -> float:
         """⟨a, b⟩ of the real fields whose half spectra's bands a and b are (up to the transform's constant)."""
-        return float(np.sum(self.weights * (a.real * b.real + a.imag * b.imag), dtype=np.float64))
+        return float(np.vdot(a * self.weights, b).real)
 
     def _solve(self, r: np.ndarray) -> np.ndarray:
-        """δ̂ after ``steps`` of P⁻¹-preconditioned conjugate gradients on A·δ̂ = r̂ from 0."""
+        """δ̂ after ``steps`` of P⁻¹-preconditioned conjugate gradients on A·δ̂ = r̂ from 0, in the modes."""
         delta, z = np.zeros_like(r), self._precondition(r)
         p, rz = z, self._dot(r, z)
         for step in range(self.steps):
