@@ -13,8 +13,7 @@
   the host.
 
 Two scalar reads an iteration (the two reductions), and the margin's band (four rectangles each way); the
-calibration's and the penalties' terms are uploaded once
-per solver (``CalibrationTerms.on_device``).
+calibration's and the penalties' terms are uploaded once per solver (``CalibrationTerms.on_device``).
 """
 from __future__ import annotations
 
