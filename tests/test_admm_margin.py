@@ -84,6 +84,17 @@ def direct_margin_band(split, state) -> np.ndarray:
     return split.margin.band.take(rfft2_of_window(state.xi, split.field_shape))
 
 
+def test_a_correction_is_the_band_of_a_real_fields_spectrum():
+    """Band.real keeps a real field's band and drops the part of the k_x = 0 column that no real field has (its
+    anti-Hermitian part along k_y), as an inverse real transform drops it."""
+    band = Band((12, 18), (5, 7), (3, 4))
+    real = band.take(scipy.fft.rfft2(RNG.standard_normal((2, 12, 18))))
+    odd, column = np.zeros_like(real), RNG.standard_normal(real.shape[:-1])
+    odd[..., 0] = column - column[..., ::-1]                      # anti-Hermitian along k_y: z_−k = −conj z_k
+    assert np.abs(odd[..., 0]).max() > 0.1
+    np.testing.assert_allclose(band.real(real + odd), real, atol=1e-12)
+
+
 def test_the_tracked_spectrum_of_the_margin_band_is_its_transform():
     """After each c-step, Ξ (tracked by the recursion from the window's change) is the low band of ξ's spectrum, over
     40 relaxed iterations; a new data penalty, which rescales ξ, has it transformed again."""

@@ -609,12 +609,17 @@ def test_block_reads_and_writes_match_numpy(rows, path):
     assert np.array_equal(backend.to_host(device), host)
 
 
-def test_admm_kernels_track_the_margins_band_of_the_x_steps_relaxed_point(engine):
-    """The margin's correction on the kernels (clsdcam/algorithms/admm/margin.py): after each of 12 relaxed
-    iterations' c-step, the tracked band Q is the band of rfft2(αHv + (1 − α)x + ξ), the x-step's relaxed point, to
-    float32's rounding (2e-6 of its largest coefficient, the recursion's rounding decaying by (2 − α)/2 an
-    iteration); new data penalties start it again from ξ, and it goes on matching."""
+def test_admm_kernels_track_the_margins_band_of_the_x_steps_relaxed_point(engine, monkeypatch):
+    """The margin's correction on the kernels (clsdcam/algorithms/admm/margin.py), which corrects at every c-step:
+    after each of 12 relaxed iterations' c-step, the tracked band Q is the band of rfft2(αHv + (1 − α)x + ξ), the
+    x-step's relaxed point, to float32's rounding (2e-6 of its largest coefficient, the recursion's rounding decaying
+    by (2 − α)/2 an iteration); new data penalties start it again from ξ, and it goes on matching."""
     from clsdcam.algorithms.admm.balance import repenalise
+    from clsdcam.algorithms.admm.margin import MarginCorrection
+
+    corrections, correction = [], MarginCorrection.correction
+    monkeypatch.setattr(MarginCorrection, "correction",
+                        lambda self, *band: corrections.append(correction(self, *band)) or corrections[-1])
 
     backend = new_backend("float32", engine)
     split = admm_pair("float32", backend, n_bands=3)[1]
@@ -627,6 +632,7 @@ def test_admm_kernels_track_the_margins_band_of_the_x_steps_relaxed_point(engine
         split.c_step(state)
         assert relative_peak_error(state.margin_band, relaxed_point_band(split, state, backend)) <= 2e-6
         split.splits(state, split.relaxation)
+    assert len(corrections) == 12 and all(np.abs(delta).max() > 0 for delta in corrections)
 
 
 def relaxed_point_band(split, state, backend) -> np.ndarray:

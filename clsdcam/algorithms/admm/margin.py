@@ -1,4 +1,4 @@
-"""The c-step's correction for the field's margin (the host's steps): a few conjugate-gradient steps, on the field's
+"""The c-step's correction for the field's margin (the host's steps and the kernels'): a few conjugate-gradient steps, on the field's
 lowest frequencies, towards the c-step with the data split's unobserved part eliminated. docs/convergence.md ("Where
 the road left lies", "The margin's correction built") has the measurements.
 
@@ -39,7 +39,7 @@ rfft2(hv), D, and the band Q of q's spectrum give
     Ξ⁺ = (Q − D) / 2,   x̂⁺ = D + Ξ⁺,   and the next   Q⁺ = αĤv̂ + (1 − α)x̂⁺ + Ξ⁺   (v̂ corrected),
 
 the same decay of rounding. The kernels track Q (``SplitState.margin_band``), and read the band of D and of v̂₀ from
-the device and write v̂'s and Ĥv̂'s back (four rectangles each way, 4 × 150 coefficients a band), the correction's
+the device and write v̂'s and Ĥv̂'s back (two rectangles a spectrum, 2 × 150 coefficients a band each way), the correction's
 arithmetic on the host: the x-step relaxes Hv itself, so Ĥv̂ is written unrelaxed.
 
 Exact. At a fixed point of the corrected iteration x = Hv over the field, so Hv₀ − x = −Hδ and r₀ is linear in δ:
@@ -227,7 +227,7 @@ class MarginCorrection:
 
     def _dot(self, a: np.ndarray, b: np.ndarray) -> float:
         """⟨a, b⟩ of the real fields whose half spectra's bands a and b are (up to the transform's constant)."""
-        return float(np.vdot(a * self.weights, b).real)
+        return float(np.vdot((a * self.weights).astype(np.complex128), b.astype(np.complex128)).real)
 
     def _solve(self, r: np.ndarray) -> np.ndarray:
         """δ̂ after ``steps`` of P⁻¹-preconditioned conjugate gradients on A·δ̂ = r̂ from 0, in the modes."""
