@@ -93,8 +93,9 @@ class OpenCLBackend:
     def write_block(self, array, rows: slice, block: np.ndarray) -> None:
         """One rectangular write (clEnqueueWriteBufferRect), blocking (``block`` may go once it returns); ValueError
         for a block that is not the rectangle's shape (the copy's region is the array's)."""
-        if block.shape[:-1] != array.shape[:-2] + (rows.stop - rows.start,):
-            raise ValueError(f"block {block.shape}: expected {array.shape[:-2] + (rows.stop - rows.start,)} + (columns,)")
+        expected = array.shape[:-2] + (rows.stop - rows.start,)
+        if block.shape[:-1] != expected:
+            raise ValueError(f"block {block.shape}: expected {expected} + (columns,)")
         block = np.ascontiguousarray(block, array.dtype)
         cl.enqueue_copy(self.queue, array.data, block, **_rectangle(array, rows, block.shape[-1]), is_blocking=True)
 

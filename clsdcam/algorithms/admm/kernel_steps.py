@@ -12,8 +12,8 @@
   before that kernel, v̂'s after it, and v̂'s and Ĥv̂'s corrected bands written back, the correction worked out on
   the host.
 
-Two scalar reads an iteration (the two reductions), and the margin's band (two rectangles a spectrum, two spectra each way); the
-calibration's and the penalties' terms are uploaded once per solver (``CalibrationTerms.on_device``).
+Two scalar reads an iteration (the two reductions), and the margin's band (two rectangles a spectrum, two spectra each
+way); the calibration's and the penalties' terms are uploaded once per solver (``CalibrationTerms.on_device``).
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
-"""The c-step's correction for the field's margin (the host's steps and the kernels'): a few conjugate-gradient steps, on the field's
-lowest frequencies, towards the c-step with the data split's unobserved part eliminated. docs/convergence.md ("Where
-the road left lies", "The margin's correction built") has the measurements.
+"""The c-step's correction for the field's margin (the host's steps and the kernels'): a few conjugate-gradient steps,
+on the field's lowest frequencies, towards the c-step with the data split's unobserved part eliminated.
+docs/convergence.md ("Where the road left lies", "The margin's correction built") has the measurements.
 
 Why. ADMM splits x = Hv over the whole field, so that its c-step is diagonal in Fourier. Outside the sensor window
 no data bind x (ξ = 0 there), and the c-step's μ₁/2‖Hv − (x − ξ)‖² over that margin only pulls Hv back towards its
@@ -39,8 +39,8 @@ rfft2(hv), D, and the band Q of q's spectrum give
     Ξ⁺ = (Q − D) / 2,   x̂⁺ = D + Ξ⁺,   and the next   Q⁺ = αĤv̂ + (1 − α)x̂⁺ + Ξ⁺   (v̂ corrected),
 
 the same decay of rounding. The kernels track Q (``SplitState.margin_band``), and read the band of D and of v̂₀ from
-the device and write v̂'s and Ĥv̂'s back (two rectangles a spectrum, 2 × 150 coefficients a band each way), the correction's
-arithmetic on the host: the x-step relaxes Hv itself, so Ĥv̂ is written unrelaxed.
+the device and write v̂'s and Ĥv̂'s back (two rectangles a spectrum, 2 × 150 coefficients a band each way), the
+correction's arithmetic on the host: the x-step relaxes Hv itself, so Ĥv̂ is written unrelaxed.
 
 Exact. At a fixed point of the corrected iteration x = Hv over the field, so Hv₀ − x = −Hδ and r₀ is linear in δ:
 δ = 0 there, and the fixed point is the plain c-step's, the problem's minimiser, whatever the band.
