@@ -22,10 +22,9 @@ from clsdcam.sim import simulate
 from clsdcam.solve.solver import Settings, Solver
 from clsdcam.solve.state import SolverState
 from clsdcam.backends import blocks
-from clsdcam.algorithms.admm.host_steps import Splitting, difference, difference_adjoint_add
+from clsdcam.algorithms.admm.host_steps import Splitting, difference, difference_adjoint_add, sweep_bands
 from clsdcam.algorithms.admm.jit_steps import JitSplitting
-from clsdcam.algorithms.admm.terms import (TERMS_KEY, CalibrationTerms, Penalties, SplitState, band_degrees,
-                                          band_pivots, sweep_bands)
+from clsdcam.algorithms.admm.terms import TERMS_KEY, CalibrationTerms, Penalties, SplitState, band_degrees, band_pivots
 
 RNG = np.random.default_rng(7)
 

@@ -503,9 +503,9 @@ def main(argv=None) -> int:
             Settings(converge=args.converge)          # the package's own rule for --converge
         except InputError as error:
             parser.error(str(error))
-    host_only = {*ACCELERATIONS, *DUAL_VARIANTS, "margin"}
+    host_only = {*ACCELERATIONS, *DUAL_VARIANTS}
     if args.backend != "numpy" and any(set(v) & host_only for v in args.variants):
-        parser.error("--variants momentum/anderson/spectral/duals/refresh/rebalance/margin wrap the host steps: "
+        parser.error("--variants momentum/anderson/spectral/duals/refresh/rebalance wrap the host steps: "
                      "--backend numpy")
     if args.against and args.variants:
         parser.error("--against re-times the default and today: no --variants")

@@ -4,8 +4,9 @@
 * :mod:`.terms`: the penalties, the state's arrays, the calibration's terms and the steps' common base;
 * :mod:`.balance`: the TV split's penalty balanced along each axis, once, from the iterate's differences;
 * :mod:`.host_steps`: the steps on NumPy arrays (row blocks on the host's threads);
-* :mod:`.margin`: the host c-step's correction for the field's margin, a few conjugate-gradient steps on the lowest
-  frequencies towards the c-step with the data split's unobserved part eliminated (not on the kernels yet);
+* :mod:`.margin`: the c-step's correction for the field's margin, a few conjugate-gradient steps on the lowest
+  frequencies towards the c-step with the data split's unobserved part eliminated (on both backends, worked on the
+  host);
 * :mod:`.jit_steps`: the same with the splits, the TV adjoint and the solve along λ compiled by Numba, one loop a pass
   (the ``jit`` extra; :func:`~.algorithm.host_steps` picks it where Numba is installed);
 * :mod:`.kernel_steps`: the steps as ``kernels/admm.cl`` on a backend with programs (OpenCL), chosen by

@@ -1,7 +1,7 @@
 """ADMM's steps on NumPy arrays: :class:`Splitting`, the iteration :mod:`clsdcam.algorithms.admm` derives, with both
 passes and the c-step's solve along λ on cache-sized row blocks on the host's threads (``backends/blocks``): the
-iteration reads each cube about twice besides its transforms. The first differences D_d and their adjoints are
-here too (the tridiagonal sweeps along λ are :func:`~.terms.sweep_bands`).
+iteration reads each cube about twice besides its transforms. The first differences D_d and their adjoints, and
+the tridiagonal sweeps along λ, are here too.
 
 The data split on the sensor window. Outside the window the x-step is the relaxation alone (ξ = 0 there): x − ξ
 becomes y = αHv + (1 − α)(x − ξ). So the host keeps x − ξ over the field as its spectrum Ŷ and steps it there, and x
@@ -18,7 +18,7 @@ import scipy.fft
 
 from ...backends import irfft2, irfft2_to_window, map_blocks, rfft2_of_window, scratch_buffer
 from .margin import margin_correction
-from .terms import CalibrationTerms, SplitState, SplittingBase, sweep_bands
+from .terms import CalibrationTerms, SplitState, SplittingBase
 
 FFT_CHUNK_BYTES = 4 << 20     # spectrum bytes per chunk of bands in the transforms (host_convolution's)
 
@@ -78,6 +78,25 @@ def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarr
     out[:, 1:] += scaled[:, :n - 1]
     out[:, 0] += scaled[:, n - 1] if above is None else scale * above
     return out
+
+
+def sweep_bands(g: np.ndarray, pivots: np.ndarray, coupling, scratch: dict) -> np.ndarray:
+    """g ← v with (a·I + e·D_λᵀD_λ)v = g along axis 0, one system per (y, x), by Thomas's sweeps on the pivots m of
+    :func:`~.terms.band_pivots` (e = ``coupling``, in g's real precision): forward g_j ← (g_j + e·g_{j−1})·m_j, back
+    g_j ← g_j + (e·m_j)·g_{j+1}; each step one plane of the block (``kernels/admm.cl``'s admm_band_solve, in its
+    order)."""
+    g[0] *= pivots[0]
+    if not coupling:
+        g[1:] *= pivots[1:]
+        return g
+    term = scratch_buffer(scratch, "sweep term", g.shape[1:], g.dtype)
+    factor = scratch_buffer(scratch, "sweep factor", pivots.shape[1:], pivots.dtype)
+    for j in range(1, len(g)):
+        g[j] += np.multiply(g[j - 1], coupling, out=term)
+        g[j] *= pivots[j]
+    for j in range(len(g) - 2, -1, -1):
+        g[j] += np.multiply(g[j + 1], np.multiply(pivots[j], coupling, out=factor), out=term)
+    return g
 
 
 def relax(q: np.ndarray, previous: np.ndarray, alpha: float) -> np.ndarray:

@@ -51,7 +51,7 @@ import numpy as np
 import scipy.fft
 
 from ...backends import rfft2_of_window, single_threaded_blas
-from .terms import band_coupling, band_diagonal
+from .terms import band_coupling, band_diagonal, difference_spectrum
 
 BAND = (8, 10)     # the correction's frequencies |k_y| < 8, |k_x| < 10 cycles over the field (fewer on a small one)
 
@@ -121,8 +121,9 @@ class Band:
 
 def path_eigenvalues(n_bands: int) -> np.ndarray:
     """The eigenvalues 2 − 2cos(πj/K), j = 0…K − 1, of D_λᵀD_λ (:func:`~.terms.band_degrees` its diagonal, −1 its
-    off-diagonals), whose eigenvectors are the DCT-II's."""
-    return 2 - 2 * np.cos(np.pi * np.arange(n_bands) / n_bands)
+    off-diagonals), whose eigenvectors are the DCT-II's: the circular difference's spectrum on 2K points, its first
+    K (the path with free ends is the circle of its mirror image)."""
+    return difference_spectrum(2 * n_bands)[:n_bands]
 
 
 def margin_correction(split) -> "MarginCorrection | None":

@@ -1,13 +1,12 @@
 """What ADMM's steps share on every backend (:mod:`clsdcam.algorithms.admm`): the penalties, the state's arrays,
-the calibration's terms (built once per solver and kept in its shared store), the c-step's tridiagonal solve along λ
-on the host, and the base of the steps, with the problem's scales the penalties are set from."""
+the calibration's terms (built once per solver and kept in its shared store) and the base of the steps, with the
+problem's scales the penalties are set from."""
 from __future__ import annotations
 
 from dataclasses import astuple, dataclass, fields, replace
 
 import numpy as np
 
-from ...backends import scratch_buffer
 from ...camera.geometry import transfer_function
 
 TERMS_KEY = "admm calibration terms"     # the solver's shared store keeps the CalibrationTerms under this name
@@ -97,25 +96,6 @@ def band_pivots(diagonal: np.ndarray, coupling: float, n_bands: int) -> np.ndarr
     for j in range(1, n_bands):
         pivots[j] = 1.0 / (diagonal + coupling * degrees[j] - coupling * coupling * pivots[j - 1])
     return pivots
-
-
-def sweep_bands(g: np.ndarray, pivots: np.ndarray, coupling, scratch: dict) -> np.ndarray:
-    """g ← v with (a·I + e·D_λᵀD_λ)v = g along axis 0, one system per (y, x), by Thomas's sweeps on the pivots m of
-    :func:`band_pivots` (e = ``coupling``, in g's real precision): forward g_j ← (g_j + e·g_{j−1})·m_j, back
-    g_j ← g_j + (e·m_j)·g_{j+1}; each step one plane of the block (``kernels/admm.cl``'s admm_band_solve, in its
-    order)."""
-    g[0] *= pivots[0]
-    if not coupling:
-        g[1:] *= pivots[1:]
-        return g
-    term = scratch_buffer(scratch, "sweep term", g.shape[1:], g.dtype)
-    factor = scratch_buffer(scratch, "sweep factor", pivots.shape[1:], pivots.dtype)
-    for j in range(1, len(g)):
-        g[j] += np.multiply(g[j - 1], coupling, out=term)
-        g[j] *= pivots[j]
-    for j in range(len(g) - 2, -1, -1):
-        g[j] += np.multiply(g[j + 1], np.multiply(pivots[j], coupling, out=factor), out=term)
-    return g
 
 
 def band_coupling(p: Penalties, axes) -> float:
