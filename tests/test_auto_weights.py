@@ -8,8 +8,9 @@ from clsdcam.algorithms.admm import Admm, balance
 from clsdcam.algorithms.admm.algorithm import LIGHTER_FEW_POINTS, NONNEG, NONNEG_FEW_POINTS, NONNEG_POINT_LIKE, TV
 from clsdcam.solve import auto_weights
 from clsdcam.solve.auto_weights import (AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, FEWEST_POINTS_PER_PIXEL,
-                                        GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS_STOP, RECOUNT_AT, SPOTS_FROM, AutoWeights,
-                                        auto_tolerance, probe_reading)
+                                        GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS_STOP, RECOUNT_AT, SPARSE_BELOW,
+                                        SPARSE_LIGHT_BELOW, SPOTS_FROM, AutoWeights, auto_tolerance, probe_reading,
+                                        sparse_in_good_light)
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.sim import simulate
@@ -291,6 +292,36 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tol
     stops = [line for line in stand_in.notes if line.startswith("stop: --converge auto, ")]
     assert [said in line for line in stops] == ([] if said is None else [True])
     assert said is None or stops[0].startswith(f"stop: --converge auto, {tolerance:.2g} (")
+
+
+@pytest.mark.parametrize("every, sigma, narrow", [
+    (50, 0.003, True),                      # p = 0.02 < SPARSE_BELOW, σ̂ in good light: the stop stays narrow
+    (50, 0.007, True),                      # σ̂ over the points' GOOD_LIGHT_BELOW, under SPARSE_LIGHT_BELOW
+    (50, 0.01, False),                      # the same scene in low light: widened
+    (33, 0.003, False),                     # p = 0.0303 ≥ SPARSE_BELOW: not sparse, widened
+])
+def test_a_sparse_scene_in_good_light_keeps_the_narrow_stop(every, sigma, narrow):
+    """A scene that is not point-like (p ≥ 0.0025) but sparse (p under SPARSE_BELOW) in good light (σ̂ under
+    SPARSE_LIGHT_BELOW) keeps CONVERGE, said in a note; in low light, or at SPARSE_BELOW and above, the stop widens.
+    Neither is point-like, so the algorithm is told nothing."""
+    cube = np.zeros((4, 32, 32))
+    cube.reshape(-1)[::every] = 1.0
+    weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=sigma, cube=cube)
+    weights.act(stand_in, stand_in)
+    p, noise = weights.chosen["mean_over_peak"], weights.chosen["noise_estimate"]
+    assert p == pytest.approx(1 / every, rel=0.05) and noise == pytest.approx(sigma, rel=0.05)
+    assert sparse_in_good_light(weights.chosen) is narrow and stand_in.told_point_like == 0
+    assert stand_in.rules.converge == (CONVERGE if narrow else CONVERGE_WIDE)
+    stops = [line for line in stand_in.notes if line.startswith("stop: --converge auto, ")]
+    said = (f"{CONVERGE:g} (a sparse scene in good light: mean/peak {p:.2g} < {SPARSE_BELOW:g}, noise {noise:.2g} < "
+            f"{SPARSE_LIGHT_BELOW:g})" if narrow else f"{CONVERGE_WIDE:g} (not a point-like scene")
+    assert len(stops) == 1 and said in stops[0]
+
+
+def test_no_sparse_reading_without_the_probe():
+    assert not sparse_in_good_light({"noise_estimate": 0.001})
+    assert auto_tolerance(CONVERGE, CONVERGE_WIDE, False, False, sparse=True) == CONVERGE
+    assert auto_tolerance(CONVERGE, CONVERGE_WIDE, True, False, sparse=True) == CONVERGE
 
 
 @pytest.mark.parametrize("wide_stop", [CONVERGE_WIDE, None])

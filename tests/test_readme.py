@@ -325,9 +325,11 @@ def test_every_figure_of_the_readme_is_the_codes():
     low, high = SPECTRAL_RANGE
     claims = [f"{TILE}×{TILE} spectral filter array, {N_BANDS} bands over {low:g}–{high:g} nm, "
               f"{SENSOR_SHAPE[0]}×{SENSOR_SHAPE[1]} sensor",
-              f"within {100 * CONVERGE_WIDE:g} % of that minimiser, {100 * CONVERGE:g} % where the scene is point-like",
-              f"`--converge auto`: {CONVERGE_WIDE:g}, or {CONVERGE:g} on point-like scenes and where the probe does not "
-              f"run, narrower on a few points until a recount finds lit spots, at most {AUTO_CAP})",
+              f"within {100 * CONVERGE_WIDE:g} % of that minimiser, {100 * CONVERGE:g} % where the scene is point-like "
+              f"or sparse in good light",
+              f"`--converge auto`: {CONVERGE_WIDE:g}, or {CONVERGE:g} on point-like scenes, on sparse ones in good "
+              f"light and where the probe does not run, narrower on a few points until a recount finds lit spots, at "
+              f"most {AUTO_CAP})",
               f"against {reference['iters']} {reference['algorithm'].upper()} iterations"]
     text = " ".join(re.sub(r"```.*?```", "", README.read_text(encoding="utf-8"), flags=re.S).split())
     assert [claim for claim in claims if claim not in text] == []

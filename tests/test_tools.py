@@ -28,7 +28,7 @@ import weight_factors  # noqa: E402
 import weight_oracles  # noqa: E402
 import weight_rejudge  # noqa: E402
 from clsdcam.metrics import psnr, spectral_angle  # noqa: E402
-from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT  # noqa: E402
+from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, sparse_in_good_light  # noqa: E402
 from clsdcam.solve.convergence import FIRST_READING, WINDOW  # noqa: E402
 from clsdcam.algorithms.admm import Admm  # noqa: E402
 from clsdcam.solve import settings  # noqa: E402
@@ -246,7 +246,8 @@ def test_bench_converged_judges_the_three_rules_against_cached_references(tmp_pa
     assert again["converge"] == 1e9 and "the default at --converge 1e+09" in text
     assert {s["default"]["tolerance"] for s in again["scenes"]} == {1e9} and "converged at 1e+09 |" in text
     assert all(s["default"]["tolerance"] in (CONVERGE, CONVERGE_WIDE) for s in first["scenes"])
-    assert all((s["default"]["tolerance"] == CONVERGE_WIDE) == (s["default"]["mean_over_peak"] >= Admm.point_like_below)
+    assert all((s["default"]["tolerance"] == CONVERGE_WIDE)
+               == (s["default"]["mean_over_peak"] >= Admm.point_like_below and not sparse_in_good_light(s["default"]))
                for s in first["scenes"])
     assert f"the default's {bench_converged.AUTO_AT + FIRST_READING} iterations (converged)" in progress
     assert "reference" not in progress                  # read from the cache: no solve to report

@@ -31,7 +31,8 @@ from bench_converged import curve, timed_solve, within
 from bench_panel import add_kinds_option, chosen_scenes, panel_scene, scene_done, scene_indices
 from bench_stop import replay, save_grid, scene_grid
 from clsdcam.algorithms.admm.algorithm import POINT_LIKE_BELOW
-from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, auto_tolerance, probe_reading, recount_reading
+from clsdcam.solve.auto_weights import (AUTO_AT, RECOUNT_AT, auto_tolerance, probe_reading, recount_reading,
+                                        sparse_in_good_light)
 from clsdcam.solve.convergence import WINDOW
 from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE
 
@@ -71,7 +72,8 @@ def run_scene(plan: dict, args) -> dict:
     answer, before = points[-1], next(p for p in points if p["iteration"] >= points[-1]["iteration"] - SETTLED_OVER)
     point_like, few_points, lighter = probe_reading(attrs, POINT_LIKE_BELOW)
     default = (CONVERGE if recount_reading(attrs)
-               else auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points, lighter))
+               else auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points, lighter,
+                                   not point_like and sparse_in_good_light(attrs)))
     return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
             "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
             "lighter": lighter, "noise": attrs["noise_estimate"],

@@ -193,9 +193,10 @@ def add_solver_options(p: argparse.ArgumentParser):
     p.add_argument("--converge", type=weight(True), default="auto", metavar="D|auto",
                    help=f"with --iters auto: stop when the estimated relative distance to the converged cube is below "
                         f"D; auto (the default): {CONVERGE:g}, or {CONVERGE_WIDE:g} once iteration {AUTO_AT} shows a "
-                        f"scene that is not point-like, or less on a point-like scene of few lit voxels ({CONVERGE:g} "
-                        f"again where a recount at iteration {RECOUNT_AT} finds lit spots); {CONVERGE:g} where that "
-                        f"probe does not run (FISTA, a weight given; docs/convergence.md)")
+                        f"scene that is not point-like (unless sparse in good light), or less on a point-like scene "
+                        f"of few lit voxels ({CONVERGE:g} again where a recount at iteration {RECOUNT_AT} finds lit "
+                        f"spots); {CONVERGE:g} where that probe does not run (FISTA, a weight given; "
+                        f"docs/convergence.md)")
     p.add_argument("--algorithm", default="auto", choices=("auto",) + tuple(ALGORITHMS),
                    help="the algorithm the solve runs: fista (FISTA with adaptive restart), admm (ADMM with "
                         "closed-form steps: fewer iterations, band space only, --tv and --l1 only), or auto (the "

@@ -52,6 +52,12 @@ that changed the iteration, and the stop goes back to the tolerance it narrowed.
 gathered, a point lights a few voxels whatever the sensor, where the spots grow with the field (docs/convergence.md,
 "A few points counted again").
 
+A scene that is not point-like but sparse in good light, p under ``SPARSE_BELOW`` and σ̂ under ``SPARSE_LIGHT_BELOW``
+(the simulator's sparse scenes of a few sources on a dim background, in its standard light), keeps the narrow
+tolerance: the measurement fixes its answer so well that the wide one stopped five such scenes of two panels
+0.04–0.48 dB short of it, two beyond the rules' 0.2 dB, where the narrow one took the four run again to 0.01–0.25 dB
+short, one beyond (docs/convergence.md, "Sparse scenes in good light keep the narrow stop").
+
 On small sensors, where a few points light enough of the frame for p to pass the threshold, the stop widens as
 before. Where the probe does not run (no auto weight, or an algorithm without a threshold) the tolerance stays.
 
@@ -96,6 +102,16 @@ LIGHTER_FEW_POINTS_STOP = 0.4
 # the noise σ̂ (of max|b|) under which the probe reads good light: 0.0022–0.0044 on the simulator's standard-light
 # points and sources (96×112 to 160×192), 0.0057–0.0106 in its low light
 GOOD_LIGHT_BELOW = 0.005
+# the probe's p under which a scene that is not point-like is sparse: in good light its stop does not widen. The
+# simulator's sparse scenes in standard light read 0.0058–0.0204 at 128×160×64 and stopped 0.04–0.48 dB short of their
+# answer at the wide tolerance, two of five beyond 0.2 dB; its piecewise scenes read 0.040–0.058, natural 0.021–0.096,
+# real 0.090–0.147, and the demo's scene 0.0091 (docs/convergence.md, "Sparse scenes in good light keep the narrow
+# stop")
+SPARSE_BELOW = 0.03
+# the noise σ̂ (of max|b|) under which such a scene is in good light: the simulator's spread scenes read 0.0039–0.0049
+# in its standard light and 0.0123–0.0162 in its low light (128×160×64), where its sparse scenes held the answer at the
+# wide tolerance; 0.008 is about the geometric middle of the gap, so a light between the two keeps the narrow stop
+SPARSE_LIGHT_BELOW = 0.008
 # a scene counted as a few points at AUTO_AT is counted again here, the first iteration the stop can fire (the estimate
 # forgot its windows at AUTO_AT and reads after FIRST_READING)
 RECOUNT_AT = AUTO_AT + FIRST_READING
@@ -140,12 +156,21 @@ def lighter_few_points(noise: float, lit_per_pixel: float) -> bool:
     return noise < GOOD_LIGHT_BELOW and lit_per_pixel >= FEWEST_POINTS_PER_PIXEL
 
 
-def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: bool, lighter: bool = False) -> float:
-    """``--converge auto``'s tolerance from the probe's reading (:func:`probe_reading`, the module docstring):
-    ``wide`` on a scene that is not point-like; on a point-like one, FEW_POINTS_STOP·``converge`` on a scene of a
-    few points (LIGHTER_FEW_POINTS_STOP· on one to lighten), else ``converge``."""
+def sparse_in_good_light(attrs: dict) -> bool:
+    """Whether the probe read a sparse scene in good light: p (``mean_over_peak``) under SPARSE_BELOW and σ̂
+    (``noise_estimate``) under SPARSE_LIGHT_BELOW. False where the probe did not measure."""
+    p = attrs.get("mean_over_peak")
+    return p is not None and p < SPARSE_BELOW and attrs["noise_estimate"] < SPARSE_LIGHT_BELOW
+
+
+def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: bool, lighter: bool = False,
+                   sparse: bool = False) -> float:
+    """``--converge auto``'s tolerance from the probe's reading (:func:`probe_reading`, :func:`sparse_in_good_light`,
+    the module docstring): ``wide`` on a scene that is not point-like, unless ``sparse`` in good light
+    (``converge``); on a point-like one, FEW_POINTS_STOP·``converge`` on a scene of a few points
+    (LIGHTER_FEW_POINTS_STOP· on one to lighten), else ``converge``."""
     if not point_like:
-        return wide
+        return converge if sparse else wide
     if few_points:
         return converge * (LIGHTER_FEW_POINTS_STOP if lighter else FEW_POINTS_STOP)
     return converge
@@ -213,10 +238,16 @@ class AutoWeights:
 
     def _tune_stop(self, driver, point_like: bool, few_points: bool, lighter: bool) -> None:
         """``--converge auto`` from the probe's reading (:func:`probe_reading`, the module docstring): widened on a
-        scene that is not point-like, narrowed on a scene of a few points (less on one to lighten); said in a note."""
+        scene that is not point-like unless it is sparse in good light, narrowed on a scene of a few points (less on
+        one to lighten); said in a note."""
         p, n, per_pixel = (self.chosen[name] for name in ("mean_over_peak", "lit_voxels", "lit_per_pixel"))
-        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points, lighter)
-        if not point_like:
+        sparse = not point_like and sparse_in_good_light(self.chosen)
+        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points, lighter, sparse)
+        if sparse:
+            noise = self.chosen["noise_estimate"]
+            driver.note(f"stop: --converge auto, {driver.rules.converge:g} (a sparse scene in good light: mean/peak "
+                        f"{p:.2g} < {SPARSE_BELOW:g}, noise {noise:.2g} < {SPARSE_LIGHT_BELOW:g})")
+        elif not point_like:
             driver.widen_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "
                         f"{p:.2g} ≥ {self.point_like_below:g})")

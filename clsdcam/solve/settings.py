@@ -18,7 +18,8 @@ from .priors import AUTO, PRIORS
 DEFAULT_ITERS = AUTO  # iterate until converged (``converge``), at most AUTO_CAP
 AUTO_CAP = 3000       # the most iterations an automatic stop runs (the panel's references' length, docs/convergence.md)
 CONVERGE = 0.05       # the estimated relative distance to the limit an automatic stop stops at (docs/convergence.md)
-CONVERGE_WIDE = 0.1   # --converge auto's, once the point-like probe reads a scene that is not point-like
+CONVERGE_WIDE = 0.1   # --converge auto's, once the point-like probe reads a scene that is not point-like (nor sparse
+#                       in good light: clsdcam.solve.auto_weights.SPARSE_BELOW)
 COLD_ITERS = 40     # a stream's cold start (a batch chunk's first frame): what reached a cold solve's accuracy (with --subspace, docs/batch.md)
 DEFAULT_TOL = 0.0
 
