@@ -73,7 +73,7 @@ def run_scene(plan: dict, args) -> dict:
     point_like, few_points, lighter = probe_reading(attrs, POINT_LIKE_BELOW)
     default = (CONVERGE if recount_reading(attrs)
                else auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points, lighter,
-                                   not point_like and sparse_in_good_light(attrs)))
+                                   sparse_in_good_light(attrs)))
     return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
             "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
             "lighter": lighter, "noise": attrs["noise_estimate"],

@@ -96,8 +96,7 @@ def final_point(sim, result, seconds: float) -> dict:
             "seconds": seconds, "iterations": result.iterations, "stop_reason": result.stop_reason,
             "estimate": result.attrs.get("distance_estimate"), "tolerance": result.attrs.get("stop_tolerance"),
             "mean_over_peak": result.attrs.get("mean_over_peak"), "noise_estimate": result.attrs.get("noise_estimate"),
-            "lit_voxels": result.attrs.get("lit_voxels"),
-            "lit_per_pixel": result.attrs.get("lit_per_pixel"),
+            "lit_voxels": result.attrs.get("lit_voxels"), "lit_per_pixel": result.attrs.get("lit_per_pixel"),
             "lit_voxels_recounted": result.attrs.get("lit_voxels_recounted")}
 
 
