@@ -23,6 +23,7 @@ import bench_road  # noqa: E402
 import bench_stop  # noqa: E402
 import compare_recon  # noqa: E402
 import compare_speed  # noqa: E402
+import lit_weights  # noqa: E402
 import rank_signals  # noqa: E402
 import weight_factors  # noqa: E402
 import weight_oracles  # noqa: E402
@@ -33,6 +34,7 @@ from clsdcam.solve.convergence import FIRST_READING, WINDOW  # noqa: E402
 from clsdcam.algorithms.admm import Admm  # noqa: E402
 from clsdcam.solve import settings  # noqa: E402
 from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE  # noqa: E402
+from clsdcam.solve.priors import TotalVariation  # noqa: E402
 from clsdcam.solve.solver import Settings, Solver  # noqa: E402
 
 
@@ -978,6 +980,57 @@ def test_weight_rejudge_solves_again_the_scenes_whose_default_weight_changed(tmp
     assert refused.value.code == 2 and "one seed, size and bands" in capsys.readouterr().err
 
 
+def test_lit_weights_judges_each_sigma1_against_the_fixed_weights_and_today(tmp_path, capsys, monkeypatch,
+                                                                           piecewise_panel):
+    """Each σ1 is the default solved with that ``lit_noise`` (the weight 0.06·σ̂·σ̂/σ1 on a widely lit scene in low
+    light), judged by the weight rule against the fixed multiples and by rule 4 against today's default, and the rule
+    is restored; a scene that is not widely lit is skipped unsolved; --join reprints the table."""
+    rule = TotalVariation.auto_weight
+    monkeypatch.setattr(Admm, "widely_lit_above", 0.0)          # every scene widely lit
+    out = tmp_path / "lit"
+    assert lit_weights.main(["--size", "24x32", "--bands", "8", "--scenes", "2", "--seed", "7", "--only", "1",
+                             "--sigmas", "0.003,0.006", "--out", str(out)]) == 0
+    table = capsys.readouterr().out
+    assert TotalVariation.auto_weight is rule
+    (scene,) = json.loads((out / "lit.json").read_text())["scenes"]
+    noise, runs = scene["probe"]["noise_estimate"], scene["runs"]
+    assert scene["level"] == "low light" and noise > 0.006 and scene["skipped"] is None
+    for sigma in (0.003, 0.006):
+        own = runs[f"σ1 {sigma:g}"]
+        assert own["tv_chosen"] == pytest.approx(0.06 * noise * noise / sigma, rel=1e-6)
+        fixed = [r["points"][-1] for name, r in runs.items() if name.startswith("--tv ")]
+        best = max(fixed, key=lambda p: p["psnr"])
+        last, today = own["points"][-1], runs["today"]["points"][-1]
+        weight = min(last["psnr"] - best["psnr"] + 0.5, best["angle"] + 1 - last["angle"])
+        regression = max(last["psnr"] - today["psnr"] + 0.2, today["angle"] + 0.5 - last["angle"])
+        assert f"τ {own['tv_chosen']:.3g}, " in table and f"weight {weight:+.2f}" in table
+        assert f"rule 4 {regression:+.2f}" in table
+    assert runs["today"]["algorithm"] == "fista" and runs["today"]["points"][-1]["iteration"] == 300
+    assert sorted(r["tv_chosen"] for n, r in runs.items() if "(×" in n) == pytest.approx(
+        [m * 0.06 * noise for m in lit_weights.MULTIPLES], rel=1e-3)
+    assert lit_weights.main(["--join", str(out / "lit.json")]) == 0
+    assert capsys.readouterr().out.strip() == table.strip()
+
+    monkeypatch.setattr(Admm, "widely_lit_above", float("inf"))
+    monkeypatch.setattr(lit_weights, "run", lambda *args: pytest.fail("a scene that is not widely lit was solved"))
+    assert lit_weights.main(["--size", "24x32", "--bands", "8", "--scenes", "2", "--seed", "7", "--only", "1",
+                             "--out", str(out)]) == 0
+    assert "| not widely lit |" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--seed", "7", "--sigmas", "0,0.005"], "σ1 values are positive"),
+    (["--seed", "7", "--sigmas", "x"], "σ1 values are positive"),
+    ([], "--seed is required"),
+])
+def test_lit_weights_refuses_bad_options_before_writing(tmp_path, capsys, args, said):
+    with pytest.raises(SystemExit) as stop:
+        lit_weights.main(["--size", "24x32", "--bands", "8", *args, "--out", str(tmp_path / "out")])
+    errors = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]
+    assert stop.value.code == 2 and len(errors) == 1 and said in errors[0]
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("spoil, message", [
     (lambda p: p["scenes"][0]["runs"]["default"].update(tv_chosen=None), "cannot read the panels"),
     (lambda p: p["scenes"][0]["runs"]["default"].update(tv_chosen=0), "weight is not > 0"),
@@ -1004,7 +1057,8 @@ def test_weight_rejudge_refuses_a_malformed_panel_before_solving(tmp_path, capsy
     assert refused.value.code == 2 and "error:" in errors[-1] and message in errors[-1]
 
 
-PANEL_TOOLS = (bench_panel, bench_converged, bench_stop, bench_answer)     # with --scenes: an index past the panel is refused too
+PANEL_TOOLS = (bench_panel, bench_converged, bench_stop, bench_answer,     # with --scenes: an index past the panel
+               lit_weights)                                             # is refused too
 
 
 @pytest.mark.parametrize("tool, only", [(tool, only) for tool in (*PANEL_TOOLS, weight_oracles)
