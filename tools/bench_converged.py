@@ -314,6 +314,12 @@ def balance_cell(factors) -> str:
     return "–" if factors is None else ", ".join(f"{b:.2g}" for b in factors)
 
 
+def regression_margin(run: dict, today: dict) -> float:
+    """Rule 4's margin for a run's final point against today's (positive: it holds): not lower in PSNR by more than
+    PSNR_DB *and* higher in angle by more than ANGLE_DEG at once."""
+    return max(run["psnr"] - today["psnr"] + PSNR_DB, today["angle"] + ANGLE_DEG - run["angle"])
+
+
 def margins(scene: dict) -> dict:
     """Every rule's margin for one scene (positive: it holds)."""
     ref, today, default = scene["reference"], scene["today"], scene["default"]
@@ -321,7 +327,7 @@ def margins(scene: dict) -> dict:
     return {"answer_db": default["psnr"] - ref["psnr"] + PSNR_DB,
             "answer_deg": ref["angle"] + ANGLE_DEG - default["angle"],
             "time_ratio": default["seconds"] / today["seconds"],
-            "regression": max(default["psnr"] - today["psnr"] + PSNR_DB, today["angle"] + ANGLE_DEG - default["angle"]),
+            "regression": regression_margin(default, today),
             "speedup": None if fista_time is None else fista_time / default["seconds"]}
 
 

@@ -15,7 +15,7 @@ stop. Each σ1 is judged by two rules:
 
 - the weight rule (``bench_panel.sweep_margins``, as ``--tv auto`` is judged): PSNR within 0.5 dB of the best run
   by PSNR, fixed weights and the σ1 runs together, and the angle within 1° of that run's;
-- rule 4 (``bench_converged.margins``' "regression"): not lower than today's default by more than 0.2 dB *and*
+- rule 4 (``bench_converged.regression_margin``): not lower than today's default by more than 0.2 dB *and*
   higher in angle by more than 0.5° at once.
 
 Writes ``lit.json`` after every scene and ``lit.md``, and prints the table with each σ1's count of scenes passed.
@@ -30,7 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_accuracy import panel_parser, report, save_json, size_text  # noqa: E402
-from bench_converged import ANGLE_DEG, PSNR_DB, TODAY  # noqa: E402
+from bench_converged import TODAY, regression_margin  # noqa: E402
 from bench_panel import (AUTO, chosen_scenes, panel_scene, point, progress, run, scene_indices,  # noqa: E402
                          sweep_margins)
 from weight_rejudge import chosen_now  # noqa: E402
@@ -83,8 +83,7 @@ def solve_scene(sim, noise: float, sigmas) -> dict:
 def verdict(scene: dict, name: str) -> dict:
     """Run ``name``'s margins: the weight rule's (dB, °) and rule 4's (positive: it holds)."""
     own, today = scene["runs"][name]["points"][-1], scene["runs"]["today"]["points"][-1]
-    return {"weight": min(sweep_margins(scene, name)),
-            "regression": max(own["psnr"] - today["psnr"] + PSNR_DB, today["angle"] + ANGLE_DEG - own["angle"])}
+    return {"weight": min(sweep_margins(scene, name)), "regression": regression_margin(own, today)}
 
 
 def judged_scene(index: int, plan: dict, shape, bands: int, sigmas) -> dict:
