@@ -50,6 +50,8 @@ class Residual:
 
     def __init__(self, sigma: float = 0.01, cube=None):
         self.residual_buffer = np.random.default_rng(0).normal(0, sigma, (256, 256))
+        self.b = np.full((256, 256), 0.1)           # the measurement over its peak: q = mean(b)/max|b| ≈ 0.1
+        self.b[0, 0] = 1.0
         self.x, self.iterations, self.rescored, self.notes = None, AUTO_AT, [], []
         self.cube, self.model, self.algorithm, self.told_point_like = cube, self, self, 0
         self.told_few_points, self.rerouted = None, []
@@ -104,21 +106,23 @@ def test_a_point_like_scene_in_good_light_takes_a_lighter_weight(noise, point_li
     assert rule.for_noise(noise, point_like) == pytest.approx(0.06 * noise * factor)
 
 
-@pytest.mark.parametrize("noise, widely_lit, factor", [
-    (0.003, True, 1.0),              # widely lit in good light: the rule as it is
-    (0.0135, True, 0.0135 / 0.0045),  # widely lit in low light: heavier by σ̂/σ1
-    (0.0135, False, 1.0),            # not widely lit: as it is
+@pytest.mark.parametrize("noise, lit_mean, factor", [
+    (0.003, 0.2, 1.0),                           # widely lit in good light (σ̂²/q under V1): the rule as it is
+    (0.0135, 0.2, 0.0135 ** 2 / (0.2 * 4e-4)),   # widely lit in low light: heavier by σ̂²/(q·V1)
+    (0.0135, 0.4, 0.0135 ** 2 / (0.4 * 4e-4)),   # the same noise spread over more light: less so
+    (0.0135, None, 1.0),                         # not widely lit: as it is
+    (0.0135, 0.0, 1.0),                          # no mean light read (a dark-subtracted frame's q ≤ 0): as it is
 ])
-def test_a_widely_lit_scene_in_low_light_takes_a_heavier_weight(noise, widely_lit, factor):
-    rule = AutoWeight(start=3e-4, per_noise=0.06, lowest=1e-9, highest=1.0, point_noise=0.009, lit_noise=0.0045)
-    assert rule.for_noise(noise, widely_lit=widely_lit) == pytest.approx(0.06 * noise * factor)
-    assert rule._replace(lit_noise=None).for_noise(noise, widely_lit=widely_lit) == pytest.approx(0.06 * noise)
+def test_a_widely_lit_scene_in_low_light_takes_a_heavier_weight(noise, lit_mean, factor):
+    rule = AutoWeight(start=3e-4, per_noise=0.06, lowest=1e-9, highest=1.0, point_noise=0.009, lit_variance=4e-4)
+    assert rule.for_noise(noise, lit_mean=lit_mean) == pytest.approx(0.06 * noise * factor)
+    assert rule._replace(lit_variance=None).for_noise(noise, lit_mean=lit_mean) == pytest.approx(0.06 * noise)
 
 
 def test_the_heavier_weight_keeps_the_ceiling_and_a_point_like_reading_comes_first():
     rule = TotalVariation.auto_weight
-    assert rule.for_noise(0.02, widely_lit=True) == rule.highest < 0.06 * 0.02 * 0.02 / rule.lit_noise
-    assert rule.for_noise(0.003, True, True) == pytest.approx(rule.for_noise(0.003, True))
+    assert rule.for_noise(0.02, lit_mean=0.2) == rule.highest < 0.06 * 0.02 * 0.02 ** 2 / (0.2 * rule.lit_variance)
+    assert rule.for_noise(0.003, True, 0.01) == pytest.approx(rule.for_noise(0.003, True))
     assert rule.for_noise(0.003, True) < rule.for_noise(0.003)
 
 
@@ -171,11 +175,11 @@ def lit_fraction(cube: np.ndarray) -> float:
 ])
 def test_act_raises_the_weight_of_a_widely_lit_scene_in_low_light(cube, widely_lit_above, lit):
     weights = AutoWeights(build_priors(BACKEND, Settings(tv="auto"), lambda name: 1.0), 0.0025, None, widely_lit_above)
-    stand_in = Residual(sigma=0.01, cube=cube)        # σ̂ above the rule's σ1
+    stand_in = Residual(sigma=0.01, cube=cube)        # σ̂²/q above the rule's V1
     weights.act(stand_in, stand_in)
-    prior, noise = weights.priors[0], weights.chosen["noise_estimate"]
-    assert noise > prior.auto_weight.lit_noise
-    assert prior.relative == pytest.approx(prior.auto_weight.for_noise(noise, widely_lit=lit))
+    prior, noise, q = weights.priors[0], weights.chosen["noise_estimate"], weights.chosen["measured_mean_over_peak"]
+    assert q == pytest.approx(stand_in.b.mean() / stand_in.b.max()) and noise ** 2 / q > prior.auto_weight.lit_variance
+    assert prior.relative == pytest.approx(prior.auto_weight.for_noise(noise, lit_mean=q if lit else None))
     assert (prior.relative > 1.5 * prior.auto_weight.for_noise(noise)) == lit
     assert ("a widely lit scene" in stand_in.notes[0]) == lit and not stand_in.told_point_like
 
@@ -226,9 +230,11 @@ def test_a_solve_weighs_a_widely_lit_scene_in_low_light_more():
                    noise_var=1e-4, photons=2e3)
     admm = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="admm")
     noise, rule = admm.attrs["noise_estimate"], TotalVariation.auto_weight
-    assert admm.attrs["mean_over_peak"] >= Admm.widely_lit_above == 0.065 and noise > rule.lit_noise
-    assert admm.attrs["tv_chosen"] == pytest.approx(rule.for_noise(noise, widely_lit=True))
-    assert rule.for_noise(noise, widely_lit=True) > 1.5 * rule.for_noise(noise)
+    q = admm.attrs["measured_mean_over_peak"]
+    assert q == pytest.approx(sim.measurement.mean(dtype=float) / sim.measurement.max(), rel=1e-5)
+    assert admm.attrs["mean_over_peak"] >= Admm.widely_lit_above == 0.065 and noise ** 2 / q > rule.lit_variance
+    assert admm.attrs["tv_chosen"] == pytest.approx(rule.for_noise(noise, lit_mean=q))
+    assert rule.for_noise(noise, lit_mean=q) > 1.5 * rule.for_noise(noise)
     assert "a widely lit scene" in admm.attrs["skips"]
     fista = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="fista")
     assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))

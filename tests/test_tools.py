@@ -980,48 +980,78 @@ def test_weight_rejudge_solves_again_the_scenes_whose_default_weight_changed(tmp
     assert refused.value.code == 2 and "one seed, size and bands" in capsys.readouterr().err
 
 
-def test_lit_weights_judges_each_sigma1_against_the_fixed_weights_and_today(tmp_path, capsys, monkeypatch,
-                                                                           piecewise_panel):
-    """Each σ1 is the default solved with that ``lit_noise`` (the weight 0.06·σ̂·σ̂/σ1 on a widely lit scene in low
-    light), judged by the weight rule against the fixed multiples and by rule 4 against today's default, and the rule
-    is restored; a scene that is not widely lit is skipped unsolved; --join reprints the table."""
+def test_lit_weights_judges_each_v1_against_the_fixed_weights_and_today(tmp_path, capsys, monkeypatch,
+                                                                       piecewise_panel):
+    """Each V1 is the default solved with that ``lit_variance`` (the weight 0.06·σ̂·σ̂²/(q·V1) on a widely lit scene in
+    low light), judged by the weight rule against the fixed multiples and by rule 4 against today's default, and the
+    rule is restored; a scene that is not widely lit is skipped unsolved; --join reprints the table, and merges
+    another file's runs of the same scene (an earlier rule's, named "σ1 …"), judged beside them."""
     rule = TotalVariation.auto_weight
     monkeypatch.setattr(Admm, "widely_lit_above", 0.0)          # every scene widely lit
     out = tmp_path / "lit"
     assert lit_weights.main(["--size", "24x32", "--bands", "8", "--scenes", "2", "--seed", "7", "--only", "1",
-                             "--sigmas", "0.003,0.006", "--out", str(out)]) == 0
+                             "--variances", "3e-4,6e-4", "--out", str(out)]) == 0
     table = capsys.readouterr().out
     assert TotalVariation.auto_weight is rule
     (scene,) = json.loads((out / "lit.json").read_text())["scenes"]
-    noise, runs = scene["probe"]["noise_estimate"], scene["runs"]
-    assert scene["level"] == "low light" and noise > 0.006 and scene["skipped"] is None
-    for sigma in (0.003, 0.006):
-        own = runs[f"σ1 {sigma:g}"]
-        assert own["tv_chosen"] == pytest.approx(0.06 * noise * noise / sigma, rel=1e-6)
-        fixed = [r["points"][-1] for name, r in runs.items() if name.startswith("--tv ")]
-        best = max(fixed, key=lambda p: p["psnr"])
-        last, today = own["points"][-1], runs["today"]["points"][-1]
-        weight = min(last["psnr"] - best["psnr"] + 0.5, best["angle"] + 1 - last["angle"])
-        regression = max(last["psnr"] - today["psnr"] + 0.2, today["angle"] + 0.5 - last["angle"])
-        assert f"τ {own['tv_chosen']:.3g}, " in table and f"weight {weight:+.2f}" in table
-        assert f"rule 4 {regression:+.2f}" in table
+    probe, runs = scene["probe"], scene["runs"]
+    noise, q = probe["noise_estimate"], probe["measured_mean_over_peak"]
+    assert scene["level"] == "low light" and noise ** 2 / q > 6e-4 and scene["skipped"] is None
+    for variance in (3e-4, 6e-4):
+        own = runs[f"V1 {variance:g}"]
+        assert own["tv_chosen"] == pytest.approx(0.06 * noise * noise ** 2 / (q * variance), rel=1e-6)
+        assert f"τ {own['tv_chosen']:.3g}, " in table and lit_margins(runs, own) in table
     assert runs["today"]["algorithm"] == "fista" and runs["today"]["points"][-1]["iteration"] == 300
     assert sorted(r["tv_chosen"] for n, r in runs.items() if "(×" in n) == pytest.approx(
         [m * 0.06 * noise for m in lit_weights.MULTIPLES], rel=1e-3)
     assert lit_weights.main(["--join", str(out / "lit.json")]) == 0
     assert capsys.readouterr().out.strip() == table.strip()
 
+    earlier = runs["--tv " + f"{0.06 * noise:.3g} (×1)"]       # a stand-in for the earlier rule's run
+    other = tmp_path / "earlier.json"
+    earlier_scene = {**scene, "probe": {"noise_estimate": noise}, "runs": {"σ1 0.01": earlier, "today": runs["today"]}}
+    other.write_text(json.dumps({"size": "24x32", "bands": 8, "scenes": [earlier_scene]}))
+    assert lit_weights.main(["--join", str(other), str(out / "lit.json")]) == 0
+    joined = capsys.readouterr().out
+    assert lit_margins(runs, earlier) in joined and f"{q:.3f}" in joined
+    assert "σ1 0.01: the weight rule on" in joined and "V1 0.0006: the weight rule on" in joined
+
+    twice = noise ** 2 / (2 * q)                     # the V1 that gives twice the noise rule's weight
+    assert lit_weights.main(["--join", str(out / "lit.json"), "--predict", f"{twice!r},1e-9"]) == 0
+    predicted = capsys.readouterr().out
+    doubled = runs[next(name for name in runs if name.endswith("(×2)"))]
+    assert f"| {lit_weights.point(doubled)}, τ {doubled['tv_chosen']:.3g}, {lit_margins(runs, doubled)} |" in predicted
+    ceiling = runs[next(name for name in runs if name.endswith("(×4)"))]      # the cap 0.003 is past ×4: held there
+    assert ceiling["tv_chosen"] < TotalVariation.auto_weight.highest == 0.003
+    assert f"{lit_weights.point(ceiling)}, τ 0.003, {lit_margins(runs, ceiling)}" in predicted
+    assert lit_weights.measured_mean({**scene, "probe": {}, "size": "24x32", "bands": 8}) == pytest.approx(q, rel=1e-6)
+
+    monkeypatch.setattr(lit_weights, "run", lambda *args: pytest.fail("a scene no V1 moves was solved"))
+    assert lit_weights.main(["--size", "24x32", "--bands", "8", "--scenes", "2", "--seed", "7", "--only", "1",
+                             "--variances", "1", "--out", str(out)]) == 0          # σ̂²/q under V1: the noise rule's
+    assert "| the noise rule's weight |" in capsys.readouterr().out
     monkeypatch.setattr(Admm, "widely_lit_above", float("inf"))
-    monkeypatch.setattr(lit_weights, "run", lambda *args: pytest.fail("a scene that is not widely lit was solved"))
     assert lit_weights.main(["--size", "24x32", "--bands", "8", "--scenes", "2", "--seed", "7", "--only", "1",
                              "--out", str(out)]) == 0
     assert "| not widely lit |" in capsys.readouterr().out
 
 
+def lit_margins(runs: dict, own: dict) -> str:
+    """A rule's run's margins as the table says them: the weight rule's against the best fixed run, rule 4's against
+    today's."""
+    fixed = [r["points"][-1] for name, r in runs.items() if name.startswith("--tv ")]
+    best = max(fixed, key=lambda p: p["psnr"])
+    last, today = own["points"][-1], runs["today"]["points"][-1]
+    weight = min(last["psnr"] - best["psnr"] + 0.5, best["angle"] + 1 - last["angle"])
+    regression = max(last["psnr"] - today["psnr"] + 0.2, today["angle"] + 0.5 - last["angle"])
+    return f"weight {weight:+.2f}, rule 4 {regression:+.2f}"
+
+
 @pytest.mark.parametrize("args, said", [
-    (["--seed", "7", "--sigmas", "0,0.005"], "σ1 values are positive"),
-    (["--seed", "7", "--sigmas", "x"], "σ1 values are positive"),
+    (["--seed", "7", "--variances", "0,4e-4"], "V1 values are positive"),
+    (["--seed", "7", "--variances", "x"], "V1 values are positive"),
     ([], "--seed is required"),
+    (["--seed", "7", "--predict", "4e-4"], "--predict judges the runs of --join"),
 ])
 def test_lit_weights_refuses_bad_options_before_writing(tmp_path, capsys, args, said):
     with pytest.raises(SystemExit) as stop:

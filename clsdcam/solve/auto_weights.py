@@ -62,15 +62,16 @@ On small sensors, where a few points light enough of the frame for p to pass the
 before. Where the probe does not run (no auto weight, or an algorithm without a threshold) the tolerance stays.
 
 A second threshold on the same p, ``Algorithm.widely_lit_above``, marks a widely lit scene, the light of its iterate
-spread over the frame (ADMM: p at least 0.065, where forty-one of the simulator's forty-two low-light real
-cubes measured read 0.0699–0.147 at 128×160×64, and the highest low-light scene measured to lose at the heavier
-weight, a piecewise one, 0.0630; the other real cube, at 0.058, wants the heavier weight but is under the
-threshold). There a
-rule with a ``lit_noise`` σ1 makes the weight heavier in low light: it rises as σ̂² above σ1
-(:meth:`clsdcam.solve.priors.AutoWeight.for_noise`; docs/convergence.md, "A heavier weight for widely lit scenes in
-low light" and "A lower widely lit threshold"). The threshold was measured at 128×160×64; at 64×80 p moves both
-ways and misses one of six real cubes (0.061; the same sections). A dark iterate (p = 1) counts as widely lit. It is
-measured only where the algorithm also has a point-like threshold (the probe's one reading).
+spread over the frame (ADMM: p at least 0.065, where forty-one of the simulator's forty-two low-light real cubes
+measured read 0.0699–0.147 at 128×160×64, and the highest low-light scene measured to lose at the heavier weight, a
+piecewise one, 0.0630; the other real cube, at 0.058, wants the heavier weight but is under the threshold). There a
+rule with a ``lit_variance`` V1 makes the weight heavier in low light: it rises as σ̂²/q above V1, q the
+measurement's mean over its peak (:func:`measured_mean`, the attribute ``measured_mean_over_peak``;
+:meth:`clsdcam.solve.priors.AutoWeight.for_noise`; docs/convergence.md, "A heavier weight for widely lit scenes in
+low light", "A lower widely lit threshold" and "The widely lit weight read per unit of mean light"). The threshold
+was measured at 128×160×64; at 64×80 p moves both ways and misses one of six real cubes (0.061; the same sections). A
+dark iterate (p = 1) counts as widely lit. It is measured only where the algorithm also has a point-like threshold
+(the probe's one reading).
 
 Why per pixel: at iteration 30 each point is still spread by the caustic, whose extent grows with the field, so a
 scene's n grows with the sensor: sixteen sources count 173–250 at 96×112, 265–448 at 112×144, 302–621 at 128×160
@@ -176,6 +177,12 @@ def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: b
     return converge
 
 
+def measured_mean(problem) -> float:
+    """q = mean(b)/max|b| of the problem's measurement (it holds b/max|b|): the light's spread over the sensor, which
+    sets how much of σ̂ (of the peak) is shot noise (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`)."""
+    return float(problem.backend.to_host(problem.b).mean(dtype=float))
+
+
 def window_reading(problem, x) -> tuple[float, int, int]:
     """(p, voxels, bands) of the iterate ``x``'s sensor window: its mean over its peak (1 where it is dark), its
     voxels and its bands."""
@@ -223,8 +230,9 @@ class AutoWeights:
         self._measure_likeness(problem, driver.x)
         point_like, few_points, lighter = probe_reading(self.chosen, self.point_like_below)
         lit = widely_lit(self.chosen, self.widely_lit_above)
+        q = self.chosen["measured_mean_over_peak"] = measured_mean(problem)
         for prior in (prior for prior in self.priors if prior.auto):
-            prior.set_relative(prior.auto_weight.for_noise(noise, point_like, lit))
+            prior.set_relative(prior.auto_weight.for_noise(noise, point_like, q if lit else None))
             prior.auto = False
             scene = "; a point-like scene" if point_like else "; a widely lit scene" if lit else ""
             driver.note(f"{prior.name}: auto, {prior.relative:.3g} (noise σ ≈ {noise:.3g} of max|b|, from the "

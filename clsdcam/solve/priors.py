@@ -19,7 +19,8 @@ and, once the measurement's noise level σ̂ (relative to max|b|) is known (:mod
 threshold is ∝ σ); ``per_noise`` is calibrated on the simulator's scenes (docs/benchmarks.md, "Choosing
 ``--tv``"). On a point-like scene (the algorithm's iterate at that point has its light in a few pixels,
 :mod:`clsdcam.solve.auto_weights`) it is ``per_noise``·σ̂·min(1, σ̂/``point_noise``); on a widely lit scene (the
-iterate's light spread over the frame) ``per_noise``·σ̂·max(1, σ̂/``lit_noise``).
+iterate's light spread over the frame) ``per_noise``·σ̂·max(1, σ̂²/(q·``lit_variance``)), q the measurement's mean
+over its peak.
 
 Adding a prior: one class (``prox``, ``value``, ``reference``; the math in its docstring) and one row
 of :data:`PRIORS` (the ``Settings`` field and the ``--flag`` are generated from the row), and one test.
@@ -43,21 +44,27 @@ class AutoWeight(NamedTuple):
     lowest: float
     highest: float
     point_noise: float | None = None    # σ0: on a point-like scene, the weight falls as σ̂² below it (None: it does not)
-    lit_noise: float | None = None      # σ1: on a widely lit scene, the weight rises as σ̂² above it (None: it doesn't)
+    # V1: on a widely lit scene, the weight rises as σ̂²/q above it, q the measurement's mean over its peak (None: it
+    # does not)
+    lit_variance: float | None = None
 
-    def for_noise(self, noise: float, point_like: bool = False, widely_lit: bool = False) -> float:
-        """per_noise·σ̂, times min(1, σ̂/σ0) on a point-like scene and max(1, σ̂/σ1) on a widely lit one, kept within
-        [lowest, highest].
+    def for_noise(self, noise: float, point_like: bool = False, lit_mean: float | None = None) -> float:
+        """per_noise·σ̂, times min(1, σ̂/σ0) on a point-like scene and, on a widely lit one whose measurement's mean
+        over its peak is ``lit_mean`` = q (None: not widely lit), max(1, σ̂²/(q·V1)), kept within [lowest, highest]
+        (a q ≤ 0, as a dark-subtracted frame may read, keeps the rule's weight).
 
         A scene whose light sits in a few pixels and bands (narrow lines, point sources) wants a lighter weight in
         good light than the rule's σ̂ gives, and the same in low light (docs/convergence.md, "A lighter weight for
         point-like scenes in good light"). One whose light spreads over the frame (the real cubes) wants about the
-        same in good light and a heavier one in low light ("A heavier weight for widely lit scenes in low light")."""
+        same in good light and a heavier one in low light ("A heavier weight for widely lit scenes in low light"), read
+        as σ̂²/q, the noise's variance per unit of the mean signal: within one light, σ̂ (of the peak) grows with q,
+        as the shot noise does, where the weight these scenes want falls with it ("The widely lit weight read per
+        unit of mean light")."""
         factor = 1.0
         if point_like and self.point_noise:
             factor = min(1.0, noise / self.point_noise)
-        elif widely_lit and self.lit_noise:
-            factor = max(1.0, noise / self.lit_noise)
+        elif lit_mean is not None and lit_mean > 0 and self.lit_variance:
+            factor = max(1.0, noise * noise / (lit_mean * self.lit_variance))
         return float(np.clip(self.per_noise * noise * factor, self.lowest, self.highest))
 
 
@@ -110,10 +117,10 @@ class TotalVariation(Prior):
 
     name = "tv"
     reference = "atb_max"
-    # σ1 0.0055, refitted from 0.0045 on 21 low-light widely lit scenes and judged on three fresh seeds
-    # (docs/convergence.md, "A lighter σ1 for widely lit scenes in low light")
+    # V1 4e-4, fitted on 17 low-light widely lit scenes, checked on 21 more and judged on fresh seeds
+    # (docs/convergence.md, "The widely lit weight read per unit of mean light")
     auto_weight = AutoWeight(start=3e-4, per_noise=0.06, lowest=3e-5, highest=3e-3, point_noise=0.009,
-                             lit_noise=0.0055)
+                             lit_variance=4e-4)
     fusion = "subspace_tv"
 
     def __init__(self, backend, weight: float, settings):

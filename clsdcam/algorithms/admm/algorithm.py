@@ -69,7 +69,7 @@ BALANCE_AT = AUTO_AT    # the TV split's penalties are balanced along each axis 
 # panels' lines scenes, 0.0035–0.21 on their other 80 (docs/convergence.md, "A lighter weight for point-like scenes")
 POINT_LIKE_BELOW = 0.0025
 # and at or above which it takes a scene as widely lit, whose weight rises in low light (TotalVariation.auto_weight's
-# lit_noise): the geometric middle of the highest low-light scene measured to lose at the heavier weight (0.0630, a
+# lit_variance): the geometric middle of the highest low-light scene measured to lose at the heavier weight (0.0630, a
 # piecewise scene, which at 0.063 failed rule 4 by 0.09°) and the lowest above it measured to want it (0.0676, a
 # sparse one), at 128×160×64; before it, 0.063, the same middle of 0.0586 and 0.068. Forty-one of forty-two
 # low-light real cubes read 0.0699–0.147 there; below it one natural scene at 0.055 and one real cube at 0.058 want it
