@@ -1015,6 +1015,7 @@ def test_lit_weights_judges_each_v1_against_the_fixed_weights_and_today(tmp_path
     joined = capsys.readouterr().out
     assert lit_margins(runs, earlier) in joined and f"{q:.3f}" in joined
     assert "σ1 0.01: the weight rule on" in joined and "V1 0.0006: the weight rule on" in joined
+    assert joined.count("| 7:1 |") == 1 and "σ1 0.01: the weight rule on 1 of 1" in joined          # one scene
 
     twice = noise ** 2 / (2 * q)                     # the V1 that gives twice the noise rule's weight
     assert lit_weights.main(["--join", str(out / "lit.json"), "--predict", f"{twice!r},1e-9"]) == 0
@@ -1052,8 +1053,12 @@ def lit_margins(runs: dict, own: dict) -> str:
     (["--seed", "7", "--variances", "x"], "V1 values are positive"),
     ([], "--seed is required"),
     (["--seed", "7", "--predict", "4e-4"], "--predict judges the runs of --join"),
+    (["--join", "NO_SIZE"], "the files must be this tool's lit.json files"),
 ])
 def test_lit_weights_refuses_bad_options_before_writing(tmp_path, capsys, args, said):
+    bare = tmp_path / "bare.json"                   # a file without the size and bands its scenes need
+    bare.write_text(json.dumps({"scenes": []}))
+    args = [str(bare) if a == "NO_SIZE" else a for a in args]
     with pytest.raises(SystemExit) as stop:
         lit_weights.main(["--size", "24x32", "--bands", "8", *args, "--out", str(tmp_path / "out")])
     errors = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]

@@ -173,11 +173,11 @@ def variance_list(text: str) -> list[float]:
 
 
 def merged(scenes: list[dict]) -> list[dict]:
-    """The scenes of several files, one per (panel, index), with the runs and probe readings of each file's copy
-    together (a scene skipped in one file and judged in another is judged)."""
+    """The scenes of several files, one per (panel, index, size, bands), with the runs and probe readings of each
+    file's copy together (a scene skipped in one file and judged in another is judged)."""
     by_key: dict = {}
     for s in scenes:
-        kept = by_key.setdefault((s["panel"], s["index"]), {**s, "runs": {}})
+        kept = by_key.setdefault((s["panel"], s["index"], s["size"], s["bands"]), {**s, "runs": {}})
         kept["runs"].update(s.get("runs", {}))
         kept["probe"] = {**kept["probe"], **s["probe"]}
         kept["skipped"] = None if kept["runs"] else s["skipped"]
@@ -218,8 +218,9 @@ def predicted(scene: dict, variance: float) -> dict:
 
 
 def with_predictions(scenes: list[dict], variances) -> list[dict]:
-    """The judged scenes gain a predicted run per V1 (:func:`predicted`), named "V1 v (predicted)"."""
-    for s in (s for s in scenes if s["skipped"] is None):
+    """The judged scenes with fixed multiples gain a predicted run per V1 (:func:`predicted`), named
+    "V1 v (predicted)"."""
+    for s in (s for s in scenes if s["skipped"] is None and fixed_names(s)):
         s["runs"].update({f"V1 {v:g} (predicted)": predicted(s, v) for v in variances})
     return scenes
 

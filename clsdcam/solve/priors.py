@@ -51,7 +51,7 @@ class AutoWeight(NamedTuple):
     def for_noise(self, noise: float, point_like: bool = False, lit_mean: float | None = None) -> float:
         """per_noise·σ̂, times min(1, σ̂/σ0) on a point-like scene and, on a widely lit one whose measurement's mean
         over its peak is ``lit_mean`` = q (None: not widely lit), max(1, σ̂²/(q·V1)), kept within [lowest, highest]
-        (a q ≤ 0, as a dark-subtracted frame may read, keeps the rule's weight).
+        (a q ≤ 0, as a dark-subtracted frame may read, keeps the rule's weight; a q near 0 takes the ceiling).
 
         A scene whose light sits in a few pixels and bands (narrow lines, point sources) wants a lighter weight in
         good light than the rule's σ̂ gives, and the same in low light (docs/convergence.md, "A lighter weight for
