@@ -205,22 +205,21 @@ def measured_mean(scene: dict) -> float:
 
 
 def predicted(scene: dict, variance: float) -> dict:
-    """V1's run on a judged scene predicted from its fixed multiples' final points: the weight V1 gives
-    (:func:`lit_weights`), PSNR and angle interpolated linearly in log τ between the fixed runs around it (held at
+    """V1's run on a judged scene whose probe has q, predicted from its fixed multiples' final points: the weight V1
+    gives (:func:`lit_weights`), PSNR and angle interpolated linearly in log τ between the fixed runs around it (held at
     the end ones beyond ×1–×4)."""
-    probe = scene["probe"]
-    probe["measured_mean_over_peak"] = measured_mean(scene)        # kept: the table shows it
-    tau = lit_weights(probe, [variance])[variance]
-    fixed = sorted((run["tv_chosen"], run["points"][-1]) for name, run in scene["runs"].items() if "(×" in name)
+    tau = lit_weights(scene["probe"], [variance])[variance]
+    fixed = sorted((scene["runs"][name]["tv_chosen"], scene["runs"][name]["points"][-1]) for name in fixed_names(scene))
     at = [math.log(t) for t, _ in fixed]
     final = {key: float(np.interp(math.log(tau), at, [p[key] for _, p in fixed])) for key in ("psnr", "angle")}
     return {"tv_chosen": tau, "points": [final]}
 
 
 def with_predictions(scenes: list[dict], variances) -> list[dict]:
-    """The judged scenes with fixed multiples gain a predicted run per V1 (:func:`predicted`), named
-    "V1 v (predicted)"."""
+    """The judged scenes with fixed multiples gain their probe's q (:func:`measured_mean`; the table shows it) and a
+    predicted run per V1 (:func:`predicted`), named "V1 v (predicted)"."""
     for s in (s for s in scenes if s["skipped"] is None and fixed_names(s)):
+        s["probe"]["measured_mean_over_peak"] = measured_mean(s)
         s["runs"].update({f"V1 {v:g} (predicted)": predicted(s, v) for v in variances})
     return scenes
 
