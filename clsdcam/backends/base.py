@@ -136,13 +136,6 @@ class Platform(Protocol):
         ``mode`` "r" (read), "w" (write: its old contents may be lost) or "rw". Work queued before is done
         when the block starts; what the block writes is seen by work queued after it."""
 
-    def read_block(self, array, rows: slice, columns: int) -> np.ndarray:
-        """array[..., rows, :columns] as a NumPy copy: the same rectangle of each plane (a few of a spectrum's
-        coefficients), the queue's work before it done."""
-
-    def write_block(self, array, rows: slice, block: np.ndarray) -> None:
-        """array[..., rows, :block.shape[-1]] = ``block`` (as :meth:`read_block` reads it)."""
-
     def check_problem(self, sensor_shape, field_shape, n_bands: int, field_buffers: int | None = None) -> None:
         """InputError (needed against available memory, and what to do) when one solve cannot fit, its algorithm
         keeping ``field_buffers`` field cubes (None: FISTA's)."""

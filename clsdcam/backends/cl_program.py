@@ -17,7 +17,7 @@ import pyopencl as cl
 from .cl_devices import has_fp64, is_cpu
 
 # Build order: common types first, then each family (reduce.cl before bandmix.cl and admm.cl, which use its helpers).
-FAMILIES = ("common", "mask", "padcrop", "fft", "prox", "fista", "tv", "reduce", "bandmix", "admm")
+FAMILIES = ("common", "mask", "padcrop", "fft", "prox", "fista", "tv", "reduce", "bandmix", "admm", "margin")
 TYPES = {np.dtype(np.float32): ("float", "float2"), np.dtype(np.float64): ("double", "double2")}
 LOCAL_X = 64          # work-group width along the fastest axis of 2-D/3-D launches (GPUs)
 LOCAL_X_CPU = 256     # CPUs (PoCL): one row of 256 work items, which PoCL vectorises best (haar_tv: 90 ms

@@ -74,12 +74,6 @@ class NumpyBackend:
         """The array itself."""
         return nullcontext(array)
 
-    def read_block(self, array: np.ndarray, rows: slice, columns: int) -> np.ndarray:
-        return array[..., rows, :columns].copy()
-
-    def write_block(self, array: np.ndarray, rows: slice, block: np.ndarray) -> None:
-        array[..., rows, :block.shape[-1]] = block
-
     def check_problem(self, sensor_shape, field_shape, n_bands: int, field_buffers: int | None = None) -> None:
         """Host memory is not checked ahead (NumPy raises MemoryError where it runs out)."""
 

@@ -84,21 +84,6 @@ class OpenCLBackend:
         """The array mapped into host memory (zero-copy on CPU devices)."""
         return mapped(self.queue, array, mode)
 
-    def read_block(self, array, rows: slice, columns: int) -> np.ndarray:
-        """One rectangular read (clEnqueueReadBufferRect) of every plane's rectangle, blocking."""
-        out = np.empty(array.shape[:-2] + (rows.stop - rows.start, columns), array.dtype)
-        cl.enqueue_copy(self.queue, out, array.data, **_rectangle(array, rows, columns), is_blocking=True)
-        return self.drained(out)
-
-    def write_block(self, array, rows: slice, block: np.ndarray) -> None:
-        """One rectangular write (clEnqueueWriteBufferRect), blocking (``block`` may go once it returns); ValueError
-        for a block that is not the rectangle's shape (the copy's region is the array's)."""
-        expected = array.shape[:-2] + (rows.stop - rows.start,)
-        if block.shape[:-1] != expected:
-            raise ValueError(f"block {block.shape}: expected {expected} + (columns,)")
-        block = np.ascontiguousarray(block, array.dtype)
-        cl.enqueue_copy(self.queue, array.data, block, **_rectangle(array, rows, block.shape[-1]), is_blocking=True)
-
     def check_memory(self, nbytes: int, largest: int = 0) -> None:
         """InputError (needed vs available MiB, and what to do) if the device cannot hold ``nbytes``."""
         check_memory(self.device, nbytes, largest)
@@ -255,16 +240,6 @@ class OpenCLBackend:
 
     def _real(self, value):
         return self.dtype.type(value)
-
-
-def _rectangle(array, rows: slice, columns: int) -> dict:
-    """enqueue_copy's arguments for the rectangle array[..., rows, :columns] of a C-contiguous array and a
-    contiguous host copy of it (origins and the rows' widths in bytes; rows and planes counted)."""
-    item, (height, width) = array.dtype.itemsize, array.shape[-2:]
-    planes, count = int(np.prod(array.shape[:-2], dtype=np.int64)), rows.stop - rows.start
-    return {"buffer_origin": (0, rows.start, 0), "host_origin": (0, 0, 0), "region": (columns * item, count, planes),
-            "buffer_pitches": (width * item, height * width * item),
-            "host_pitches": (columns * item, count * columns * item)}
 
 
 def _planes(x) -> tuple[int, int, int]:

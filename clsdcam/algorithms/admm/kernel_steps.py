@@ -8,12 +8,11 @@
 * the c-step is the TV adjoint (one kernel), the backend's transforms (2K forward, 2K inverse), and between them
   one kernel that forms the right-hand side in Fourier, solves the tridiagonal system along λ at each Fourier
   coefficient by Thomas's sweeps and writes Ĥ·v̂ beside v̂ (admm_band_solve: v̂'s spectrum read and written twice,
-  the other once); with the margin's correction (:mod:`.margin`), the band of the data split's spectrum read
-  before that kernel, v̂'s after it, and v̂'s and Ĥv̂'s corrected bands written back, the correction worked out on
-  the host.
+  the other once); with the margin's correction (:mod:`.margin`), one kernel before it that takes the band of the
+  data split's spectrum, and one after it that corrects v̂'s and Ĥv̂'s bands (:mod:`.margin_kernels`).
 
-Two scalar reads an iteration (the two reductions), and the margin's band (two rectangles a spectrum, two spectra each
-way); the calibration's and the penalties' terms are uploaded once per solver (``CalibrationTerms.on_device``).
+Two scalar reads an iteration (the two reductions); the calibration's and the penalties' terms are uploaded once per
+solver (``CalibrationTerms.on_device``).
 """
 from __future__ import annotations
 
@@ -21,6 +20,7 @@ import numpy as np
 
 from ...backends.base import ints, total
 from .margin import margin_correction
+from .margin_kernels import KernelMarginCorrection
 from .terms import CalibrationTerms, SplitState, SplittingBase
 
 
@@ -32,7 +32,7 @@ class KernelSplitting(SplittingBase):
                  margin_steps: int = 0):
         super().__init__(model, terms, tv, l1, relaxation, margin_steps)
         self.backend = model.backend
-        self.workers = self.backend.workers         # the margin's host transforms
+        self.workers = self.backend.workers         # the margin's host transform where its band starts again
         self.kernels = self.backend.kernels
         self.b = b
         self.filters = terms.on_device(self.backend, "filters", terms.filters)
@@ -42,8 +42,8 @@ class KernelSplitting(SplittingBase):
     def set_penalties(self, penalties):
         """The penalties, the margin's correction of them (from the host terms), and their terms on the device."""
         super().set_penalties(penalties)
-        self.margin = margin_correction(self)
-        be, terms = self.backend, self.terms
+        be, terms, margin = self.backend, self.terms, margin_correction(self)
+        self.margin = margin and KernelMarginCorrection(margin, be, self.n_bands)
         self._gain = terms.on_device(be, "gain", self._gain)
         self._data_transfer = terms.on_device(be, "data transfer", self._data_transfer, complex_=True)
         self._pivots = terms.on_device(be, "pivots", self._pivots)
@@ -74,10 +74,11 @@ class KernelSplitting(SplittingBase):
         data, rest = state.spectra
         be.fft2(state.hv, out=data)
         be.fft2(state.rest, out=rest)
-        split = self._margin_split(state, data) if self.margin else None
+        if self.margin:
+            self.margin.split_data(state, data)
         self._band_solve(data, rest)
         if self.margin:
-            self._correct_margin(state, data, rest, split)
+            self.margin.correct(state, data, rest)
         be.ifft2(data, self.field_shape, out=state.v)
         be.ifft2(rest, self.field_shape, out=state.hv)
 
@@ -119,23 +120,6 @@ class KernelSplitting(SplittingBase):
         plane = data.shape[1] * data.shape[2]
         self.kernels.grid1("admm_band_solve", plane, data, rest, self._data_transfer, self.transfer, self._pivots,
                            self._real(self.coupling), np.int32(self.n_bands), np.int64(plane))
-
-    def _margin_split(self, state: SplitState, data) -> tuple:
-        """(x̂⁺, Ξ⁺) on the margin's band, from the band of ``data`` = rfft2(x⁺ − ξ⁺) (``MarginCorrection.field_split``;
-        ξ downloaded where the band starts again)."""
-        fresh = self.margin.band.read(self.backend, data)
-        return self.margin.field_split(state, fresh, lambda: self.backend.to_host(state.xi))
-
-    def _correct_margin(self, state: SplitState, data, rest, split: tuple) -> None:
-        """v̂ ← v̂₀ + δ̂ in ``data`` and Ĥv̂ in ``rest`` on the margin's band (the x-step relaxes Hv itself), δ̂ from
-        v̂₀'s band read back and x̂⁺'s; and the next x-step's relaxed point's band Q tracked in the state."""
-        margin, band = self.margin, self.margin.band
-        solved = band.read(self.backend, data)
-        solved += margin.correction(solved, split[0])
-        hv = margin.transfer * solved
-        band.write(self.backend, data, solved)
-        band.write(self.backend, rest, hv)
-        state.margin_band = margin.relaxed_point(hv, *split)
 
     def _convolve(self, v, spectrum, out):
         """Hv = irfft2(Ĥ·rfft2(v)) into ``out`` (2K transforms), ``spectrum`` its scratch."""

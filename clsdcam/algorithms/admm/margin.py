@@ -38,9 +38,9 @@ rfft2(hv), D, and the band Q of q's spectrum give
 
     Ξ⁺ = (Q − D) / 2,   x̂⁺ = D + Ξ⁺,   and the next   Q⁺ = αĤv̂ + (1 − α)x̂⁺ + Ξ⁺   (v̂ corrected),
 
-the same decay of rounding. The kernels track Q (``SplitState.margin_band``), and read the band of D and of v̂₀ from
-the device and write v̂'s and Ĥv̂'s back (two rectangles a spectrum, 2 × 150 coefficients a band each way), the
-correction's arithmetic on the host: the x-step relaxes Hv itself, so Ĥv̂ is written unrelaxed.
+the same decay of rounding. The kernels track Q (``SplitState.margin_band``, on the device) and do the correction's
+arithmetic on the device too, in kernels of their own (:mod:`.margin_kernels`) from this class's terms: the x-step
+relaxes Hv itself, so Ĥv̂ is written unrelaxed.
 
 Exact. At a fixed point of the corrected iteration x = Hv over the field, so Hv₀ − x = −Hδ and r₀ is linear in δ:
 δ = 0 there, and the fixed point is the plain c-step's, the problem's minimiser, whatever the band.
@@ -74,26 +74,12 @@ class Band:
         by, bx = min(band[0], hp // 2), min(band[1], wp // 2)
         self.rows, self.columns = np.arange(1 - by, by), bx
         self._field_rows = self.rows % hp
-        runs = (slice(hp + 1 - by, hp), slice(0, by))        # the field's rows of k_y < 0, then of k_y ≥ 0
-        self._runs = [rows for rows in runs if rows.stop > rows.start]
-        self._mask_y = window_mask_matrix(self.rows.astype(float), hp, h).astype(dtype)
-        self._mask_x = window_mask_matrix(np.arange(1 - bx, bx).astype(float), wp, w).T[:, bx - 1:].astype(dtype)
+        self.mask_y = window_mask_matrix(self.rows.astype(float), hp, h).astype(dtype)
+        self.mask_x = window_mask_matrix(np.arange(1 - bx, bx).astype(float), wp, w).T[:, bx - 1:].astype(dtype)
 
     def take(self, spectrum: np.ndarray) -> np.ndarray:
         """The band of ``spectrum`` (a copy)."""
         return spectrum[..., self._field_rows, :self.columns]
-
-    def read(self, backend, spectrum) -> np.ndarray:
-        """The band of a ``backend``'s ``spectrum``, its rows k_y < 0 then k_y ≥ 0 read as two rectangles."""
-        return np.concatenate([backend.read_block(spectrum, rows, self.columns) for rows in self._runs], axis=-2)
-
-    def write(self, backend, spectrum, band: np.ndarray) -> None:
-        """The band of a ``backend``'s ``spectrum`` set to ``band`` (two rectangles, as :meth:`read`)."""
-        start = 0
-        for rows in self._runs:
-            count = rows.stop - rows.start
-            backend.write_block(spectrum, rows, band[..., start:start + count, :])
-            start += count
 
     def add(self, spectrum: np.ndarray, band: np.ndarray) -> None:
         """spectrum += ``band`` zero-padded to the field's half spectrum, in place."""
@@ -114,8 +100,8 @@ class Band:
         conj ẑ_k), then T_y z T_xᵀ's columns k_x ≥ 0, as two matrix products over every band at once."""
         whole = np.concatenate([np.conj(z[..., ::-1, :0:-1]), z], axis=-1)
         k, rows, width = whole.shape
-        across = (whole.reshape(k * rows, width) @ self._mask_x).reshape(k, rows, self.columns)
-        down = self._mask_y @ across.transpose(1, 0, 2).reshape(rows, k * self.columns)
+        across = (whole.reshape(k * rows, width) @ self.mask_x).reshape(k, rows, self.columns)
+        down = self.mask_y @ across.transpose(1, 0, 2).reshape(rows, k * self.columns)
         return down.reshape(rows, k, self.columns).transpose(1, 0, 2)
 
 
@@ -153,7 +139,7 @@ class MarginCorrection:
         ``state.margin_band`` (the module docstring)."""
         fresh = self.band.take(change)
         if state.margin_band is None:
-            state.margin_band = self._dual_band(state.xi)
+            state.margin_band = self.dual_band(state.xi)
         else:
             state.margin_band *= state.margin_band.real.dtype.type((2 - self.relaxation) / 2)
             state.margin_band -= fresh / 2
@@ -161,23 +147,7 @@ class MarginCorrection:
         fresh += state.margin_band
         return fresh
 
-    def field_split(self, state, fresh: np.ndarray, window_dual) -> tuple[np.ndarray, np.ndarray]:
-        """(x̂⁺, Ξ⁺) on the band on the kernels, from D = ``fresh`` (the band of rfft2(hv), hv = x⁺ − ξ⁺ over the
-        field) and the tracked Q (``state.margin_band``): Ξ⁺ = (Q − D)/2; where Q is None, Ξ⁺ transformed from ξ
-        (``window_dual()``, ξ on the host). x̂⁺ = D + Ξ⁺ (the module docstring)."""
-        if state.margin_band is None:
-            dual = self._dual_band(window_dual())
-        else:
-            dual = state.margin_band - fresh
-            dual *= dual.real.dtype.type(0.5)
-        return fresh + dual, dual
-
-    def relaxed_point(self, hv: np.ndarray, split: np.ndarray, dual: np.ndarray) -> np.ndarray:
-        """Q = αĤv̂ + (1 − α)x̂ + Ξ on the band: the band of the next x-step's relaxed point on the kernels."""
-        real = hv.real.dtype.type
-        return real(self.relaxation) * hv + real(1 - self.relaxation) * split + dual
-
-    def _dual_band(self, xi: np.ndarray) -> np.ndarray:
+    def dual_band(self, xi: np.ndarray) -> np.ndarray:
         """Ξ: the band of ξ's spectrum, its window zero-padded (a pruned transform)."""
         return self.band.take(rfft2_of_window(np.asarray(xi), self.field_shape, self.workers))
 

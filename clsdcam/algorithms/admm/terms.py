@@ -41,8 +41,8 @@ class SplitState:
     there, x − ξ over the field as its spectrum ``data_spectrum`` (None on the kernels), and in ``hv`` the window of
     its relaxed point after the c-step, the window's change to it after the splits; with the margin's correction
     (:mod:`.margin`), ``margin_band`` what it tracks on the field's lowest frequencies: the band of ξ's spectrum on
-    the host, of the x-step's relaxed point's on the kernels (None where anything but the splits set ξ; a host array,
-    not among :meth:`arrays`)."""
+    the host, of the x-step's relaxed point's on the kernels (None where anything but the splits set ξ; on the steps'
+    own side, host or device, and not among :meth:`arrays`)."""
 
     v: np.ndarray
     hv: np.ndarray

@@ -1,0 +1,73 @@
+"""The margin's correction on the kernels (``kernels/margin.cl``): :class:`~.margin.MarginCorrection`'s band terms on
+the device and its two launches a c-step, so that the correction reads nothing back and the queue never waits for
+the host (done on the host, its band reads and writes stopped the queue twice an iteration, and its arithmetic took
+about 2.5 ms at full size: a GPU's ADMM iteration went from about 4 ms to 7–10 ms).
+
+* ``admm_margin_split`` (before the solve along λ), from the band D of rfft2(x⁺ − ξ⁺) and the tracked band Q of the
+  x-step's relaxed point: Ξ⁺ = (Q − D)/2 and x̂⁺ = D + Ξ⁺ (Ξ⁺ transformed from ξ on the host where the band starts
+  again, :meth:`~.margin.MarginCorrection.dual_band`);
+* ``admm_margin_correct`` (after it), in one work group: the residual r₀ = μ₁Ĥ*(I − T)(Ĥv̂₀ − x̂⁺), ``steps``
+  conjugate gradients in the modes along λ (the DCT-II as a K×K product), δ̂ back in the bands with its column k_x = 0
+  made Hermitian, v̂ = v̂₀ + δ̂ and Ĥv̂ written into the two spectra's bands, and Q⁺ = αĤv̂ + (1 − α)x̂⁺ + Ξ⁺.
+
+The band is small (at full size 64 × 15 × 10 coefficients): one work group does a step's passes with barriers between
+them and the inner products as group reductions, where several groups would need a launch each.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+import scipy.fft
+
+from ...backends.base import ints
+
+SCRATCH = 8        # band-sized arrays the correction works in (v̂₀, two temporaries, r, z, p, A·p, δ̂)
+GROUP = 1024       # the correction's one work group at most (a power of two; the device's and the kernel's limits too)
+
+
+def dct_matrix(n: int) -> np.ndarray:
+    """The orthonormal DCT-II as an n×n matrix: (C·z)_j = the transform's coefficient j of z."""
+    return scipy.fft.dct(np.eye(n), type=2, axis=0, norm="ortho")
+
+
+class KernelMarginCorrection:
+    """One :class:`~.margin.MarginCorrection` (its penalties' terms) on ``backend``'s device."""
+
+    def __init__(self, margin, backend, n_bands: int):
+        self.host, self.backend, self.kernels = margin, backend, backend.kernels
+        band, up = margin.band, backend.to_device
+        self.shape = (n_bands, len(band.rows), band.columns)
+        self.size = int(np.prod(self.shape))
+        self.terms = [up(margin.transfer, True), up(margin.data_transfer, True), up(margin.diagonal),
+                      up(margin.inverse), up(band.mask_y, True), up(band.mask_x, True), up(dct_matrix(n_bands))]
+        self.split, self.dual = backend.empty(self.shape, True), backend.empty(self.shape, True)
+        self.scratch = backend.empty((SCRATCH,) + self.shape, True)
+        limit = self.kernels.kernel("admm_margin_correct").get_work_group_info(
+            cl.kernel_work_group_info.WORK_GROUP_SIZE, backend.device)
+        self.group = 1 << (min(GROUP, limit, backend.device.max_work_group_size).bit_length() - 1)
+
+    def split_data(self, state, data) -> None:
+        """x̂⁺'s and Ξ⁺'s bands from ``data`` = rfft2(x⁺ − ξ⁺) and the tracked Q (``state.margin_band``); where Q is
+        None, Ξ⁺ transformed from ξ on the host and uploaded."""
+        restart = state.margin_band is None
+        if restart:
+            self.dual = self.backend.to_device(self.host.dual_band(self.backend.to_host(state.xi)), True)
+        tracked = self.dual if restart else state.margin_band
+        self.kernels.grid1("admm_margin_split", self.size, data, tracked, self.split, self.dual, np.int32(restart),
+                           *ints(self.size, *self.shape[1:], *self._spectrum(data)))
+
+    def correct(self, state, data, rest) -> None:
+        """v̂ ← v̂₀ + δ̂ in ``data``'s band, Ĥv̂ in ``rest``'s, and the next Q in ``state.margin_band`` (one work
+        group)."""
+        if state.margin_band is None:
+            state.margin_band = self.backend.empty(self.shape, True)
+        real, alpha = self.backend.dtype.type, self.host.relaxation
+        local = cl.LocalMemory(self.group * self.kernels.acc.itemsize)
+        self.kernels.launch("admm_margin_correct", (self.group,), (self.group,), data, rest, self.split, self.dual,
+                            state.margin_band, *self.terms, self.scratch, local, real(alpha), real(1 - alpha),
+                            np.int32(self.host.steps), *ints(*self.shape, *self._spectrum(data)))
+
+    @staticmethod
+    def _spectrum(data) -> tuple[int, int]:
+        """(Hp, Wq): a spectrum's rows and columns."""
+        return data.shape[-2], data.shape[-1]

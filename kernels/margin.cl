@@ -1,0 +1,204 @@
+/* ADMM's margin correction on the device (clsdcam/algorithms/admm/margin.py has the derivation; margin_kernels.py
+ * launches these). The band is the field's lowest frequencies, K·R·C coefficients stored (k, r, c) band-major: row r
+ * is k_y = r − (R − 1)/2 (R odd), column c is k_x = c ≥ 0. In a spectrum (K, Hp, Wq) its coefficient (k, r, c) is at
+ * ((k·Hp + (k_y mod Hp))·Wq + c). Complex values are REAL2 (re, im), as everywhere. */
+
+/* a mod b for a ≥ 0, written without %: a / and % pair becomes LLVM's `freeze`, which Oclgrind's uninitialised-value
+ * check cannot interpret. */
+inline int rem(int a, int b) { return a - a / b * b; }
+
+/* The spectrum's index of band coefficient i = (k, r, c). */
+inline size_t band_at(int i, int R, int C, int Hp, int Wq)
+{
+    int k = i / (R * C), rc = rem(i, R * C), r = rc / C, c = rem(rc, C);
+    int row = r - (R - 1) / 2;
+    return ((size_t)k * Hp + (size_t)(row < 0 ? row + Hp : row)) * Wq + c;
+}
+
+/* admm_margin_split: before the c-step's solve, from the band D of the data split's spectrum X = rfft2(x⁺ − ξ⁺) and the
+ * tracked band Q of the x-step's relaxed point: Ξ⁺ = (Q − D)/2 (or Ξ given in E where the band starts again,
+ * restart ≠ 0) into E, and x̂⁺'s band S = D + Ξ⁺. 1-D grid over the band's N = K·R·C coefficients. */
+__kernel void admm_margin_split(__global const REAL2 *X, __global const REAL2 *Q, __global REAL2 *S,
+                                __global REAL2 *E, int restart, int N, int R, int C, int Hp, int Wq)
+{
+    int i = get_global_id(0);
+    if (i >= N) return;
+    REAL2 d = X[band_at(i, R, C, Hp, Wq)];
+    REAL ex, ey;
+    if (restart) {
+        REAL2 e = E[i];
+        ex = e.x;
+        ey = e.y;
+    } else {
+        REAL2 q = Q[i];
+        ex = (q.x - d.x) * (REAL)0.5;
+        ey = (q.y - d.y) * (REAL)0.5;
+        store_complex(E, i, ex, ey);
+    }
+    store_complex(S, i, d.x + ex, d.y + ey);
+}
+
+/* The loops below run over the band's coefficients in one work group: item l takes i = l, l + L, … < N, and a
+ * barrier separates every pass that reads what another item wrote. */
+#define EACH(i) for (int i = get_local_id(0); i < N; i += get_local_size(0))
+#define SYNC barrier(CLK_GLOBAL_MEM_FENCE | CLK_LOCAL_MEM_FENCE)
+
+/* out = Cd·in along λ at each (r, c) (the orthonormal DCT-II's modes), or Cdᵀ·in with transpose (its inverse). */
+inline void modes_along(__global const REAL2 *in, __global REAL2 *out, __global const REAL *Cd, int transpose,
+                        int N, int K, int RC)
+{
+    EACH(i) {
+        int j = i / RC, rc = rem(i, RC);
+        REAL sx = 0, sy = 0;
+        for (int k = 0; k < K; ++k) {
+            REAL m = transpose ? Cd[k * K + j] : Cd[j * K + k];
+            REAL2 z = in[k * RC + rc];
+            sx += m * z.x;
+            sy += m * z.y;
+        }
+        store_complex(out, i, sx, sy);
+    }
+    SYNC;
+}
+
+/* out = μ₁Ĥ*(I − T)·z on the band, T = T_y ⊗ T_x the window's mask: the columns k_x < 0 of z from its Hermitian
+ * symmetry (z_{−k} = conj z_k), then (z T_x) along the columns into A, then T_y along the rows; Tm = μ₁conj(Ĥ)'s band
+ * (R, C), My (R, R), Mx (2C − 1, C) with row c′ for k_x = c′ − (C − 1). */
+inline void pulled(__global const REAL2 *z, __global REAL2 *out, __global REAL2 *A, __global const REAL2 *Tm,
+                   __global const REAL2 *My, __global const REAL2 *Mx, int N, int R, int C)
+{
+    EACH(i) {
+        int kr = i / C, c = rem(i, C), r = rem(kr, R), flipped = (kr - r) + (R - 1 - r);
+        REAL sx = 0, sy = 0;
+        for (int cc = 0; cc < 2 * C - 1; ++cc) {
+            REAL2 m = Mx[cc * C + c], w;
+            if (cc >= C - 1) {
+                w = z[kr * C + cc - (C - 1)];
+            } else {
+                w = z[flipped * C + (C - 1 - cc)];
+                w.y = -w.y;
+            }
+            sx += w.x * m.x - w.y * m.y;
+            sy += w.x * m.y + w.y * m.x;
+        }
+        store_complex(A, i, sx, sy);
+    }
+    SYNC;
+    EACH(i) {
+        int kr = i / C, c = rem(i, C), r = rem(kr, R), first = (kr - r) * C;
+        REAL sx = 0, sy = 0;
+        for (int rr = 0; rr < R; ++rr) {
+            REAL2 m = My[r * R + rr], a = A[first + rr * C + c];
+            sx += m.x * a.x - m.y * a.y;
+            sy += m.x * a.y + m.y * a.x;
+        }
+        REAL2 v = z[i], t = Tm[rem(i, R * C)];
+        REAL dx = v.x - sx, dy = v.y - sy;
+        store_complex(out, i, t.x * dx - t.y * dy, t.x * dy + t.y * dx);
+    }
+    SYNC;
+}
+
+/* ⟨a, b⟩ of the real fields whose half spectra's bands a and b are: Σ w_c·Re(conj(a)·b), w_c = 1 at c = 0, else 2. */
+inline ACC band_dot(__global const REAL2 *a, __global const REAL2 *b, __local ACC *scratch, int N, int C)
+{
+    ACC s = 0, comp = 0;
+    EACH(i) {
+        REAL2 x = a[i], y = b[i];
+        REAL w = rem(i, C) ? (REAL)2 : (REAL)1;
+        acc_add(&s, &comp, (ACC)(w * x.x) * (ACC)y.x + (ACC)(w * x.y) * (ACC)y.y);
+    }
+    ACC total = group_reduce(s - comp, scratch, 0);
+    barrier(CLK_LOCAL_MEM_FENCE);               /* every item has read the total before the scratch is used again */
+    return total;
+}
+
+/* admm_margin_correct: after the c-step's solve, the correction δ̂ of v̂₀'s band (X's) and what follows from it, in
+ * one work group (global size = local size):
+ *   r₀ = μ₁Ĥ*(I − T)(Ĥv̂₀ − x̂) in the modes along λ (S = x̂'s band), then `steps` conjugate gradients on
+ *   ΠAΠ·δ̂ = r₀ preconditioned by P⁻¹ (A·p = P·p − μ₁Ĥ*(I − T)Ĥ·p, P and P⁻¹ diagonal there: D and Dinv), δ̂ back
+ *   in the bands with its column k_x = 0 made Hermitian along k_y; then X's band ← v̂ = v̂₀ + δ̂, R's band ← Ĥv̂ (Rs,
+ *   the rest's spectrum), and Q ← αĤv̂ + βx̂ + Ξ (E = Ξ's band, β = 1 − α).
+ * W holds eight band-sized scratch arrays. T and Tm are Ĥ's and μ₁conj(Ĥ)'s bands (R, C), Cd the DCT-II (K, K). */
+__kernel void admm_margin_correct(__global REAL2 *X, __global REAL2 *Rs, __global const REAL2 *S,
+                                  __global const REAL2 *E, __global REAL2 *Q, __global const REAL2 *T,
+                                  __global const REAL2 *Tm, __global const REAL *D, __global const REAL *Dinv,
+                                  __global const REAL2 *My, __global const REAL2 *Mx, __global const REAL *Cd,
+                                  __global REAL2 *W, __local ACC *scratch, REAL alpha, REAL beta, int steps,
+                                  int K, int R, int C, int Hp, int Wq)
+{
+    int RC = R * C, N = K * RC;
+    __global REAL2 *v0 = W, *y = W + N, *A = W + 2 * N, *r = W + 3 * N, *z = W + 4 * N, *p = W + 5 * N,
+                   *ap = W + 6 * N, *delta = W + 7 * N;
+    EACH(i) {                                              /* v̂₀'s band; y = Ĥv̂₀ − x̂ */
+        REAL2 v = X[band_at(i, R, C, Hp, Wq)], t = T[rem(i, RC)], s = S[i];
+        store_complex(v0, i, v.x, v.y);
+        store_complex(y, i, (t.x * v.x - t.y * v.y) - s.x, (t.x * v.y + t.y * v.x) - s.y);
+    }
+    SYNC;
+    modes_along(y, z, Cd, 0, N, K, RC);
+    pulled(z, r, A, Tm, My, Mx, N, R, C);                  /* r₀ */
+    EACH(i) {
+        REAL2 g = r[i];
+        REAL m = Dinv[i];
+        store_complex(z, i, g.x * m, g.y * m);
+        store_complex(p, i, g.x * m, g.y * m);
+        store_complex(delta, i, 0, 0);
+    }
+    SYNC;
+    ACC rz = band_dot(r, z, scratch, N, C);
+    for (int step = 0; step < steps && rz > 0; ++step) {
+        EACH(i) {                                          /* y = Ĥp */
+            REAL2 t = T[rem(i, RC)], v = p[i];
+            store_complex(y, i, t.x * v.x - t.y * v.y, t.x * v.y + t.y * v.x);
+        }
+        SYNC;
+        pulled(y, ap, A, Tm, My, Mx, N, R, C);
+        EACH(i) {                                          /* ap = P·p − μ₁Ĥ*(I − T)Ĥ·p */
+            REAL2 v = p[i], u = ap[i];
+            REAL m = D[i];
+            store_complex(ap, i, m * v.x - u.x, m * v.y - u.y);
+        }
+        SYNC;
+        REAL length = (REAL)(rz / band_dot(p, ap, scratch, N, C));
+        EACH(i) {
+            REAL2 d = delta[i], v = p[i];
+            store_complex(delta, i, d.x + length * v.x, d.y + length * v.y);
+        }
+        SYNC;
+        if (step + 1 == steps) break;
+        EACH(i) {
+            REAL2 g = r[i], u = ap[i];
+            REAL m = Dinv[i], gx = g.x - length * u.x, gy = g.y - length * u.y;
+            store_complex(r, i, gx, gy);
+            store_complex(z, i, gx * m, gy * m);
+        }
+        SYNC;
+        ACC last = rz;
+        rz = band_dot(r, z, scratch, N, C);
+        REAL ratio = (REAL)(rz / last);
+        EACH(i) {
+            REAL2 g = z[i], v = p[i];
+            store_complex(p, i, g.x + ratio * v.x, g.y + ratio * v.y);
+        }
+        SYNC;
+    }
+    modes_along(delta, y, Cd, 1, N, K, RC);               /* δ̂ in the bands */
+    EACH(i) {                                              /* column k_x = 0 made Hermitian along k_y, into A */
+        if (rem(i, C) == 0) {
+            int kr = i / C, r0 = rem(kr, R);
+            REAL2 a = y[i], b = y[(kr - r0 + R - 1 - r0) * C];
+            store_complex(A, i, (a.x + b.x) * (REAL)0.5, (a.y - b.y) * (REAL)0.5);
+        }
+    }
+    SYNC;
+    EACH(i) {
+        REAL2 d = rem(i, C) ? y[i] : A[i], v = v0[i], t = T[rem(i, RC)], s = S[i], e = E[i];
+        REAL vx = v.x + d.x, vy = v.y + d.y;
+        REAL hx = t.x * vx - t.y * vy, hy = t.x * vy + t.y * vx;
+        size_t at = band_at(i, R, C, Hp, Wq);
+        store_complex(X, at, vx, vy);
+        store_complex(Rs, at, hx, hy);
+        store_complex(Q, i, alpha * hx + beta * s.x + e.x, alpha * hy + beta * s.y + e.y);
+    }
+}
