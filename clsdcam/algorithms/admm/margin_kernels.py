@@ -1,7 +1,8 @@
 """The margin's correction on the kernels (``kernels/margin.cl``): :class:`~.margin.MarginCorrection`'s band terms on
 the device and its two launches a c-step, so that the correction reads nothing back and the queue never waits for
-the host (done on the host, its band reads and writes stopped the queue twice an iteration, and its arithmetic took
-about 2.5 ms at full size: a GPU's ADMM iteration went from about 4 ms to 7–10 ms).
+the host. Worked out on the host, its band reads and writes stopped the queue twice an iteration: on an H200 an ADMM
+iteration then cost 2.70–4.82× a FISTA one over a whole solve, and 1.91–3.68× with these kernels (docs/convergence.md,
+"Full size on a GPU, and the margin's correction on the device").
 
 * ``admm_margin_split`` (before the solve along λ), from the band D of rfft2(x⁺ − ξ⁺) and the tracked band Q of the
   x-step's relaxed point: Ξ⁺ = (Q − D)/2 and x̂⁺ = D + Ξ⁺ (Ξ⁺ transformed from ξ on the host where the band starts
