@@ -10,6 +10,7 @@ Tolerances, relative to max|reference|: the cases' rules (elementwise 1e-6, FFT-
 reductions 1e-5).
 """
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 import pytest
@@ -595,13 +596,23 @@ def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(s
     assert np.linalg.norm(cubes[1] - cubes[0]) / np.linalg.norm(cubes[0]) <= 1e-4
 
 
-def test_admm_kernels_track_the_margins_band_of_the_x_steps_relaxed_point(engine):
+def test_admm_kernels_track_the_margins_band_of_the_x_steps_relaxed_point(engine, monkeypatch):
     """The margin's correction on the kernels (clsdcam/algorithms/admm/margin.py), which corrects at every c-step:
     after each of 12 relaxed iterations' c-step, the tracked band Q is the band of rfft2(αHv + (1 − α)x + ξ), the
     x-step's relaxed point, to float32's rounding (2e-6 of its largest coefficient, the recursion's rounding decaying
-    by (2 − α)/2 an iteration); new data penalties start it again from ξ, and it goes on matching."""
+    by (2 − α)/2 an iteration); new data penalties start it again from ξ, and it goes on matching. Every c-step's
+    correction moves v̂'s band."""
     from clsdcam.algorithms.admm.balance import repenalise
+    from clsdcam.algorithms.admm.margin_kernels import KernelMarginCorrection
 
+    moves, correct = [], KernelMarginCorrection.correct
+
+    def watched(margin, state, data, rest):
+        before = margin.correction.band.take(backend.to_host(data))
+        correct(margin, state, data, rest)
+        moves.append(np.abs(margin.correction.band.take(backend.to_host(data)) - before).max())
+
+    monkeypatch.setattr(KernelMarginCorrection, "correct", watched)
     backend = new_backend("float32", engine)
     split = admm_pair("float32", backend, n_bands=3)[1]
     assert split.margin is not None and split.relaxation != 1
@@ -614,23 +625,30 @@ def test_admm_kernels_track_the_margins_band_of_the_x_steps_relaxed_point(engine
         tracked = backend.to_host(state.margin_band)
         assert relative_peak_error(tracked, relaxed_point_band(split, state, backend)) <= 2e-6
         split.splits(state, split.relaxation)
+    assert len(moves) == 12 and min(moves) > 0
 
 
 @pytest.mark.parametrize("restart", [False, True], ids=["tracked", "from xi"])
-@pytest.mark.parametrize("dtype, kahan", [("float32", None), ("float32", True), ("float64", None)],
-                         ids=["float32", "float32-kahan", "float64"])
-def test_admm_margin_correction_kernels_match_the_hosts(dtype, kahan, restart, path):
+@pytest.mark.parametrize("dtype, kahan, group", [("float32", None, None), ("float32", True, None),
+                                                  ("float64", None, None), ("float32", None, 16)],
+                         ids=["float32", "float32-kahan", "float64", "float32-groups-of-16"])
+def test_admm_margin_correction_kernels_match_the_hosts(dtype, kahan, group, restart, path, monkeypatch):
     """The margin's two kernels against :class:`MarginCorrection` on the host, from random spectra: x̂'s band from
     the data split's band D and the tracked Q (or from ξ's transform, where the band starts again), then v̂ = v̂₀ + δ̂
     and Ĥv̂ written into the two spectra's bands (the rest of each untouched) and the next Q. The correction's ten
     conjugate-gradient steps carry rounding through their inner products: 5e-6 of the largest coefficient in float32
     (5–10e-7 measured), with float64 accumulators or compensated float32 ones (a device without fp64), 1e-13 in float64
-    (1e-15 measured); the correction itself is a tenth or more of v̂₀'s band here, so a missing one fails."""
+    (1e-15 measured); the correction itself is a tenth or more of v̂₀'s band here, so a missing one fails. The band's
+    385 coefficients are fewer than the largest group, so each item takes one: in a group of 16 each takes many, as
+    at full size."""
     from types import SimpleNamespace
 
     backend, rng = opencl(dtype, PATH_BACKEND[path], kahan), np.random.default_rng(12)
+    if group is not None:
+        monkeypatch.setattr(backend.kernels, "one_group", partial(type(backend.kernels).one_group, backend.kernels,
+                                                                  cap=group))
     split = admm_pair(dtype, backend, n_bands=5)[1]
-    device, host, band = split.margin, split.margin.host, split.margin.host.band
+    device, host, band = split.margin, split.margin.correction, split.margin.correction.band
     spectrum = (split.n_bands, split.field_shape[0], split.field_shape[1] // 2 + 1)
     d, v0, rest = ((rng.standard_normal(spectrum) + 1j * rng.standard_normal(spectrum)).astype(split.cdtype)
                    for _ in range(3))
@@ -638,7 +656,7 @@ def test_admm_margin_correction_kernels_match_the_hosts(dtype, kahan, restart, p
     xi = rng.standard_normal((split.n_bands,) + split.sensor_shape).astype(split.dtype)
     state = SimpleNamespace(margin_band=None if restart else backend.to_device(q, True), xi=backend.to_device(xi))
     data, rest_device = backend.to_device(d, True), backend.to_device(rest, True)
-    device.split_data(state, data)
+    device.split(state, data)
     data = backend.to_device(v0, True)
     device.correct(state, data, rest_device)
 
@@ -669,7 +687,7 @@ def relaxed_point_band(split, state, backend) -> np.ndarray:
     alpha, (h, w) = split.relaxation, split.sensor_shape
     point = alpha * backend.to_host(state.hv).astype(np.float64) + (1 - alpha) * backend.to_host(state.x)
     point[:, :h, :w] += backend.to_host(state.xi)
-    return split.margin.host.band.take(np.fft.rfft2(point))
+    return split.margin.correction.band.take(np.fft.rfft2(point))
 
 
 def relative_peak_error(got, want) -> float:

@@ -240,7 +240,8 @@ class Fusions(Protocol):
 class Programs(Protocol):
     """Optional: the backend's kernel programs for code outside it. ``kernels`` launches a kernel of ``kernels/*.cl``
     by name in one of the launch shapes (``grid1(name, n, *args)``, ``grid2(name, n, rows, *args)``,
-    ``grid3(name, (B, H, W), *args)``, ``reduce(name, n, *args, outputs=1)`` → per-group partials on the host)."""
+    ``grid3(name, (B, H, W), *args)``, ``reduce(name, n, *args, outputs=1)`` → per-group partials on the host, and
+    ``one_group(name, n, *args)``: one work group that loops over n elements itself)."""
 
     kernels: Any
 

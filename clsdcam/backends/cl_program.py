@@ -16,7 +16,8 @@ import pyopencl as cl
 
 from .cl_devices import has_fp64, is_cpu
 
-# Build order: common types first, then each family (reduce.cl before bandmix.cl and admm.cl, which use its helpers).
+# Build order: common types first, then each family (reduce.cl before bandmix.cl, admm.cl and margin.cl, which use its
+# helpers).
 FAMILIES = ("common", "mask", "padcrop", "fft", "prox", "fista", "tv", "reduce", "bandmix", "admm", "margin")
 TYPES = {np.dtype(np.float32): ("float", "float2"), np.dtype(np.float64): ("double", "double2")}
 LOCAL_X = 64          # work-group width along the fastest axis of 2-D/3-D launches (GPUs)
@@ -26,6 +27,7 @@ LOCAL_1D = 256        # work-group size of 1-D launches and reductions on GPUs (
 LOCAL_CPU = 1024      # CPUs (PoCL): large groups amortise the per-group scheduling cost
 
 PROGRAM_CACHE = 8     # built programs kept: (context, dtype, accumulator) combinations in use
+ONE_GROUP = 1024      # one_group's work group at most (a kernel whose passes over a small array need no second launch)
 
 
 def kernel_dir() -> Path:
@@ -100,12 +102,16 @@ class Kernels:
         return self._kernels[name]
 
     def group_limit(self, name: str) -> int:
-        """The most work items a group of kernel ``name`` may hold: ``max_group`` and the kernel's own limit on this
-        device (registers or local memory can make it lower), the latter asked once."""
+        """The most work items a group of kernel ``name`` may hold: ``max_group`` and the kernel's own limit."""
+        return min(self.max_group, self._kernel_limit(name))
+
+    def _kernel_limit(self, name: str) -> int:
+        """Kernel ``name``'s own work-group limit on this device (registers or local memory can make it lower than
+        the device's), asked once."""
         if name not in self._group_limits:
             self._group_limits[name] = self.kernel(name).get_work_group_info(
                 cl.kernel_work_group_info.WORK_GROUP_SIZE, self.device)
-        return min(self.max_group, self._group_limits[name])
+        return self._group_limits[name]
 
     def launch(self, name: str, global_size, local_size, *args):
         return self.kernel(name)(self.queue, global_size, local_size, *_args(args))
@@ -128,6 +134,15 @@ class Kernels:
     def grid1(self, name: str, n: int, *args):
         """Launch over n elements, rounded up to the 1-D group size (kernels bounds-check)."""
         return self.launch(name, (round_up(max(n, 1), self.local_1d),), (self.local_1d,), *args)
+
+    def one_group(self, name: str, n: int, *args, cap: int = ONE_GROUP):
+        """Launch one work group for a kernel that loops over n elements itself (barriers between its passes, group
+        reductions in local memory): the largest power of two within ``cap``, the device's and the kernel's limits and
+        the first one ≥ n; its local scratch (one accumulator an item) comes after ``args``."""
+        device = self.device
+        largest = min(cap, self._kernel_limit(name), device.max_work_group_size, device.max_work_item_sizes[0])
+        size = min(1 << (largest.bit_length() - 1), _power_of_two_at_least(n))
+        return self.launch(name, (size,), (size,), *args, cl.LocalMemory(size * self.acc.itemsize))
 
     def reduce(self, name: str, n: int, *args, outputs: int = 1) -> np.ndarray:
         """Run a partial-sum kernel (reduce.cl) and return its per-group partials on the host (ACC dtype):

@@ -11,8 +11,9 @@
   the other once); with the margin's correction (:mod:`.margin`), one kernel before it that takes the band of the
   data split's spectrum, and one after it that corrects v̂'s and Ĥv̂'s bands (:mod:`.margin_kernels`).
 
-Two scalar reads an iteration (the two reductions); the calibration's and the penalties' terms are uploaded once per
-solver (``CalibrationTerms.on_device``).
+Two scalar reads an iteration (the two reductions), and ξ read and its band written where the margin's band starts
+again; the calibration's and the penalties' terms are uploaded once per solver (``CalibrationTerms.on_device``), the
+margin's band terms (a few kilobytes) with each new set of penalties.
 """
 from __future__ import annotations
 
@@ -75,7 +76,7 @@ class KernelSplitting(SplittingBase):
         be.fft2(state.hv, out=data)
         be.fft2(state.rest, out=rest)
         if self.margin:
-            self.margin.split_data(state, data)
+            self.margin.split(state, data)
         self._band_solve(data, rest)
         if self.margin:
             self.margin.correct(state, data, rest)

@@ -39,8 +39,8 @@ rfft2(hv), D, and the band Q of q's spectrum give
     Ξ⁺ = (Q − D) / 2,   x̂⁺ = D + Ξ⁺,   and the next   Q⁺ = αĤv̂ + (1 − α)x̂⁺ + Ξ⁺   (v̂ corrected),
 
 the same decay of rounding. The kernels track Q (``SplitState.margin_band``, on the device) and do the correction's
-arithmetic on the device too, in kernels of their own (:mod:`.margin_kernels`) from this class's terms: the x-step
-relaxes Hv itself, so Ĥv̂ is written unrelaxed.
+arithmetic on the device too, in kernels of their own (:mod:`.margin_kernels`) from :class:`MarginCorrection`'s
+terms: the x-step relaxes Hv itself, so Ĥv̂ is written unrelaxed.
 
 Exact. At a fixed point of the corrected iteration x = Hv over the field, so Hv₀ − x = −Hδ and r₀ is linear in δ:
 δ = 0 there, and the fixed point is the plain c-step's, the problem's minimiser, whatever the band.

@@ -1,8 +1,8 @@
 """The margin's correction on the kernels (``kernels/margin.cl``): :class:`~.margin.MarginCorrection`'s band terms on
-the device and its two launches a c-step, so that the correction reads nothing back and the queue never waits for
-the host. Worked out on the host, its band reads and writes stopped the queue twice an iteration: on an H200 an ADMM
-iteration then cost 2.70–4.82× a FISTA one over a whole solve, and 1.91–3.68× with these kernels (docs/convergence.md,
-"Full size on a GPU, and the margin's correction on the device").
+the device and its two launches a c-step, so that the correction reads nothing back (but ξ, where its band starts
+again) and the queue never waits for the host. Worked out on the host, its band reads and writes stopped the queue
+twice an iteration: on an H200 an ADMM iteration then cost 2.70–4.82× a FISTA one over a whole solve, and 1.91–3.68×
+with these kernels (docs/convergence.md, "Full size on a GPU, and the margin's correction on the device").
 
 * ``admm_margin_split`` (before the solve along λ), from the band D of rfft2(x⁺ − ξ⁺) and the tracked band Q of the
   x-step's relaxed point: Ξ⁺ = (Q − D)/2 and x̂⁺ = D + Ξ⁺ (Ξ⁺ transformed from ξ on the host where the band starts
@@ -17,13 +17,11 @@ them and the inner products as group reductions, where several groups would need
 from __future__ import annotations
 
 import numpy as np
-import pyopencl as cl
 import scipy.fft
 
 from ...backends.base import ints
 
 SCRATCH = 8        # band-sized arrays the correction works in (v̂₀, two temporaries, r, z, p, A·p, δ̂)
-GROUP = 1024       # the correction's one work group at most (a power of two; the device's and the kernel's limits too)
 
 
 def dct_matrix(n: int) -> np.ndarray:
@@ -32,43 +30,38 @@ def dct_matrix(n: int) -> np.ndarray:
 
 
 class KernelMarginCorrection:
-    """One :class:`~.margin.MarginCorrection` (its penalties' terms) on ``backend``'s device."""
+    """One :class:`~.margin.MarginCorrection` (``correction``: its penalties' terms, and the host's arithmetic the
+    kernels follow) on ``backend``'s device."""
 
-    def __init__(self, margin, backend, n_bands: int):
-        self.host, self.backend, self.kernels = margin, backend, backend.kernels
-        band, up = margin.band, backend.to_device
+    def __init__(self, correction, backend, n_bands: int):
+        self.correction, self.backend, self.kernels = correction, backend, backend.kernels
+        band, up = correction.band, backend.to_device
         self.shape = (n_bands, len(band.rows), band.columns)
         self.size = int(np.prod(self.shape))
-        self.terms = [up(margin.transfer, True), up(margin.data_transfer, True), up(margin.diagonal),
-                      up(margin.inverse), up(band.mask_y, True), up(band.mask_x, True), up(dct_matrix(n_bands))]
-        self.split, self.dual = backend.empty(self.shape, True), backend.empty(self.shape, True)
+        # the terms in admm_margin_correct's order: Ĥ and μ₁conj(Ĥ) on the band, P and P⁻¹ in the modes, T_y, T_x, C
+        self.terms = [up(correction.transfer, True), up(correction.data_transfer, True), up(correction.diagonal),
+                      up(correction.inverse), up(band.mask_y, True), up(band.mask_x, True), up(dct_matrix(n_bands))]
+        self.split_band = backend.empty(self.shape, True)          # x̂⁺ on the band
+        self.dual_band = backend.empty(self.shape, True)           # Ξ⁺ on the band
         self.scratch = backend.empty((SCRATCH,) + self.shape, True)
-        limit = self.kernels.kernel("admm_margin_correct").get_work_group_info(
-            cl.kernel_work_group_info.WORK_GROUP_SIZE, backend.device)
-        self.group = 1 << (min(GROUP, limit, backend.device.max_work_group_size).bit_length() - 1)
 
-    def split_data(self, state, data) -> None:
+    def split(self, state, data) -> None:
         """x̂⁺'s and Ξ⁺'s bands from ``data`` = rfft2(x⁺ − ξ⁺) and the tracked Q (``state.margin_band``); where Q is
         None, Ξ⁺ transformed from ξ on the host and uploaded."""
         restart = state.margin_band is None
         if restart:
-            self.dual = self.backend.to_device(self.host.dual_band(self.backend.to_host(state.xi)), True)
-        tracked = self.dual if restart else state.margin_band
-        self.kernels.grid1("admm_margin_split", self.size, data, tracked, self.split, self.dual, np.int32(restart),
-                           *ints(self.size, *self.shape[1:], *self._spectrum(data)))
+            dual = self.correction.dual_band(self.backend.to_host(state.xi))
+            self.dual_band.set(np.ascontiguousarray(dual, self.dual_band.dtype))
+        tracked = self.dual_band if restart else state.margin_band
+        self.kernels.grid1("admm_margin_split", self.size, data, tracked, self.split_band, self.dual_band,
+                           np.int32(restart), *ints(self.size, *self.shape[1:], *data.shape[-2:]))
 
     def correct(self, state, data, rest) -> None:
         """v̂ ← v̂₀ + δ̂ in ``data``'s band, Ĥv̂ in ``rest``'s, and the next Q in ``state.margin_band`` (one work
         group)."""
         if state.margin_band is None:
             state.margin_band = self.backend.empty(self.shape, True)
-        real, alpha = self.backend.dtype.type, self.host.relaxation
-        local = cl.LocalMemory(self.group * self.kernels.acc.itemsize)
-        self.kernels.launch("admm_margin_correct", (self.group,), (self.group,), data, rest, self.split, self.dual,
-                            state.margin_band, *self.terms, self.scratch, local, real(alpha), real(1 - alpha),
-                            np.int32(self.host.steps), *ints(*self.shape, *self._spectrum(data)))
-
-    @staticmethod
-    def _spectrum(data) -> tuple[int, int]:
-        """(Hp, Wq): a spectrum's rows and columns."""
-        return data.shape[-2], data.shape[-1]
+        real, alpha = self.backend.dtype.type, self.correction.relaxation
+        self.kernels.one_group("admm_margin_correct", self.size, data, rest, self.split_band, self.dual_band,
+                               state.margin_band, *self.terms, self.scratch, real(alpha), real(1 - alpha),
+                               np.int32(self.correction.steps), *ints(*self.shape, *data.shape[-2:]))
