@@ -847,9 +847,12 @@ def test_bench_breakdown_splits_every_configuration_and_sets_the_fft_floor_besid
             share * row["total"] for share in row["one_off_share"].values()))
     assert rows["--rank 3"]["rank"] == 3 and rows["--rank 3"]["one_off_share"][bench_breakdown.POWER] > 0
     assert rows["default"]["per_iteration"][bench_breakdown.PRIOR] > 0
-    assert rows["--algorithm admm"]["per_iteration"][bench_breakdown.SPLITS] > 0
-    assert rows["--algorithm admm"]["one_off_share"][bench_breakdown.SETUP] > 0
+    for name in ("--algorithm admm", "--algorithm admm, NumPy's passes"):      # its balance at 30, its margin's steps
+        assert rows[name]["per_iteration"][bench_breakdown.SPLITS] > 0
+        assert rows[name]["per_iteration"][bench_breakdown.MARGIN] > 0
+        assert min(rows[name]["one_off_share"][part] for part in (bench_breakdown.SETUP, bench_breakdown.BALANCE)) > 0
     assert rows["default"]["one_off_share"][bench_breakdown.SETUP] == 0
+    assert rows["default"]["per_iteration"][bench_breakdown.MARGIN] == 0
     assert "together / FFT floor" in capsys.readouterr().out
 
 
@@ -862,8 +865,9 @@ def test_bench_breakdown_on_opencl_finishes_the_queue_and_leaves_the_host_floor_
     assert set(rows) == {"default", "--subspace", "--algorithm admm"}
     assert all(row["fft_floor"] is None and row["per_iteration"][bench_breakdown.TRANSFORMS] > 0
                for row in rows.values())
-    admm = rows["--algorithm admm"]                               # its kernels' passes and its set-up are charged
+    admm = rows["--algorithm admm"]              # its kernels' passes, its margin's kernels and its set-up are charged
     assert admm["per_iteration"][bench_breakdown.SPLITS] > 0 and admm["one_off_share"][bench_breakdown.SETUP] > 0
+    assert admm["per_iteration"][bench_breakdown.MARGIN] > 0
     assert "opencl: " in capsys.readouterr().out
 
 

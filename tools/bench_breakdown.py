@@ -19,11 +19,13 @@ parts, per iteration:
 - objective checks: F at the checkpoints (in a subspace its g(B·c)), the best iterate kept;
 - basis checks: the subspace's full step and the choice of directions every 25 iterations;
 - ADMM's splits: the x-, u- and w-steps and duals outside the transforms;
+- ADMM's margin correction: its band's split and correction (the host's arithmetic, or the kernels' two launches);
 - other: the rest of the solve (its records, the result, the driver's observers).
 
 and the one-off parts, as a share of the whole solve: moves between spaces (building a subspace's filters,
 mapping the iterates), power iterations for L, the prior weight's re-estimation, ADMM's set-up (its splitting,
-the penalties' terms, the start's splits). The FFT floor is the iteration's
+the penalties' terms, the start's splits), ADMM's balance at its iteration 30 (the iterate read to the host, the RMS of
+its differences, the duals rescaled; the new penalties' terms count as set-up). The FFT floor is the iteration's
 own 4r real 2-D transforms of the field (2 rfft2 + 2 irfft2 of r bands, r the rank the solve ended in; K in band
 space), measured in the same run (``bench_iteration.floor_timer``: pocketfft on the host, so NumPy's only). A
 row's figure is seconds per iteration over the whole solve, so a configuration that starts in band space
@@ -61,7 +63,9 @@ from clsdcam.solve.problem import Problem  # noqa: E402
 from clsdcam.sim import simulate  # noqa: E402
 from clsdcam.solve.solver import Settings, Solver  # noqa: E402
 from clsdcam.algorithms.admm import algorithm as admm_algorithm  # noqa: E402
+from clsdcam.algorithms.admm import balance as admm_balance  # noqa: E402
 from clsdcam.algorithms.admm.host_steps import Splitting  # noqa: E402
+from clsdcam.algorithms.admm.margin import MarginCorrection  # noqa: E402
 from clsdcam.algorithms.admm.terms import SplittingBase  # noqa: E402
 from clsdcam.solve.subspace import SpectralSubspace  # noqa: E402
 
@@ -77,9 +81,11 @@ MOVES = "moves between spaces"
 POWER = "power iterations"
 WEIGHTS = "weight re-estimation"
 SETUP = "ADMM's set-up"
+MARGIN = "ADMM's margin correction"
+BALANCE = "ADMM's balance"
 NUMPY_PASSES = "numpy passes"    # a configuration's field: ADMM on NumPy's passes, the compiled ones installed
-PER_ITERATION = (TRANSFORMS, FILTERS, PRIOR, MOMENTUM, OBJECTIVE, BASIS, SPLITS, OTHER)
-ONE_OFF = (MOVES, POWER, WEIGHTS, SETUP)
+PER_ITERATION = (TRANSFORMS, FILTERS, PRIOR, MOMENTUM, OBJECTIVE, BASIS, SPLITS, MARGIN, OTHER)
+ONE_OFF = (MOVES, POWER, WEIGHTS, SETUP, BALANCE)
 FFT_FUNCTIONS = ("fft", "ifft", "rfft", "irfft", "rfft2", "irfft2", "rfftn", "irfftn")
 
 # (owner, attribute, part, opaque): the functions wrapped; a rename in the package fails tests/test_tools.py
@@ -87,8 +93,11 @@ DEVICE_FFTS = [(engine, name, TRANSFORMS, False) for engine in (device_fft.HostF
                                                                  device_fft.VkFFT) for name in ("forward", "inverse")]
 try:                                   # ADMM's kernels (needs pyopencl)
     from clsdcam.algorithms.admm.kernel_steps import KernelSplitting
+    from clsdcam.algorithms.admm.margin_kernels import KernelMarginCorrection
     KERNEL_SPLITTING = [(KernelSplitting, "_band_solve", SPLITS, True), (KernelSplitting, "start", SETUP, True),
-                        (KernelSplitting, "set_penalties", SETUP, True)]
+                        (KernelSplitting, "set_penalties", SETUP, True),
+                        (KernelMarginCorrection, "split", MARGIN, True),
+                        (KernelMarginCorrection, "correct", MARGIN, True)]
 except ImportError:
     KERNEL_SPLITTING = []
 PARTS = [(scipy.fft, name, TRANSFORMS, False) for name in FFT_FUNCTIONS] + DEVICE_FFTS + [
@@ -100,6 +109,9 @@ PARTS = [(scipy.fft, name, TRANSFORMS, False) for name in FFT_FUNCTIONS] + DEVIC
     (Fista, "_extrapolate", MOMENTUM, False),
     (Admm, "iterate", SPLITS, False),
     (Splitting, "_band_solve", SPLITS, True),
+    (MarginCorrection, "data_split", MARGIN, True),
+    (MarginCorrection, "correct", MARGIN, True),
+    (admm_balance, "balance", BALANCE, True),
     (admm_algorithm, "band_steps", SETUP, True),
     (SplittingBase, "set_penalties", SETUP, True),
     (Splitting, "start", SETUP, True),

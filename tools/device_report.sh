@@ -3,7 +3,7 @@
 # benchmark (every device FFT engine) and the iteration benchmark on one OpenCL device, everything into OUTDIR.
 #
 #   tools/device_report.sh OUTDIR [--device SUBSTRING] [--size HxW] [--bands K] [--repeat N] [--ranks R,..]
-#                                 [--backends LIST] [--no-install] [--tests] [--demo] [--panel N]
+#                                 [--backends LIST] [--no-install] [--tests] [--demo] [--panel N] [--breakdown]
 #
 # The device: --device (a substring of its platform or device name, as `clsdcam --device`), else PYOPENCL_CTX, else
 # the first GPU, else the first CPU (clsdcam.backends.cl_devices.choose_device); every step runs on it through
@@ -16,7 +16,9 @@
 # Then, when asked, the checks that need a GPU (issue 47): --tests the parity and device-check tests on the device;
 # --demo `clsdcam demo` as today's default (300 FISTA iterations) and as the default, one after the other (their
 # folders in a scratch directory: a full-size cube is 37 MB); --panel N a fresh N-scene panel of tools/bench_converged.py
-# at --size/--bands on the device (OUTDIR/panel, its references cached in the scratch directory).
+# at --size/--bands on the device (OUTDIR/panel, its references cached in the scratch directory); --breakdown where a
+# solve's time goes on the device (tools/bench_breakdown.py, 300 iterations: ADMM's set-up, balance and margin
+# correction among the parts).
 # Python: $PYTHON, else .venv/bin/python, else python3. A failing step is recorded in summary.txt (exit code, log)
 # and the next one still runs; the script's own exit code is the number of failed steps.
 set -uo pipefail
@@ -25,7 +27,7 @@ cd "$(dirname "$0")/.."
 usage() { sed -n '5,6p' "$0" | sed 's/^# *//' >&2; exit 2; }
 [ $# -ge 1 ] && [ "${1#-}" = "$1" ] || usage
 OUT=$1; shift
-DEVICE="" SIZE=320x448 BANDS=64 REPEAT=3 RANKS=3,8 BACKENDS=opencl INSTALL=1 TESTS=0 DEMO=0 PANEL=0
+DEVICE="" SIZE=320x448 BANDS=64 REPEAT=3 RANKS=3,8 BACKENDS=opencl INSTALL=1 TESTS=0 DEMO=0 PANEL=0 BREAKDOWN=0
 while [ $# -gt 0 ]; do
     case $1 in
         --device) DEVICE=$2; shift 2 ;;
@@ -38,6 +40,7 @@ while [ $# -gt 0 ]; do
         --tests) TESTS=1; shift ;;
         --demo) DEMO=1; shift ;;
         --panel) [[ ${2:-} =~ ^[0-9]+$ ]] || usage; PANEL=$2; shift 2 ;;
+        --breakdown) BREAKDOWN=1; shift ;;
         *) usage ;;
     esac
 done
@@ -59,7 +62,7 @@ step() {
 
 { echo "device report, $(date -u '+%Y-%m-%d %H:%M UTC'), commit $(git rev-parse --short HEAD 2>/dev/null)"
   echo "options: device=${DEVICE:-auto} size=$SIZE bands=$BANDS repeat=$REPEAT ranks=$RANKS backends=$BACKENDS" \
-       "tests=$TESTS demo=$DEMO panel=$PANEL"
+       "tests=$TESTS demo=$DEMO panel=$PANEL breakdown=$BREAKDOWN"
   echo "machine: $(uname -srm), $(nproc) cores"; } >"$SUMMARY"
 if [ $INSTALL = 1 ]; then
     step install env VKFFT_BACKEND=opencl "$PY" -m pip install -e '.[vkfft]'
@@ -100,6 +103,10 @@ if [ $DEMO = 1 ]; then
     step demo-today "$PY" -m clsdcam demo "$SCRATCH/demo-today" --size "$SIZE" --bands "$BANDS" --iters 300 \
         --algorithm fista --backend opencl
     step demo "$PY" -m clsdcam demo "$SCRATCH/demo" --size "$SIZE" --bands "$BANDS" --backend opencl
+fi
+if [ $BREAKDOWN = 1 ]; then
+    step breakdown "$PY" tools/bench_breakdown.py --backend opencl --size "$SIZE" --bands "$BANDS" --iters 300 \
+        --ranks '' --json "$OUT/breakdown.json"
 fi
 if [ "$PANEL" -gt 0 ]; then
     step panel "$PY" tools/bench_converged.py --backend opencl --size "$SIZE" --bands "$BANDS" --scenes "$PANEL" \
