@@ -120,7 +120,8 @@ inline ACC band_dot(__global const REAL2 *a, __global const REAL2 *b, __local AC
  *   ΠAΠ·δ̂ = r₀ preconditioned by P⁻¹ (A·p = P·p − μ₁Ĥ*(I − M)Ĥ·p, P and P⁻¹ diagonal there), δ̂ back in the bands
  *   with its column k_x = 0 made Hermitian along k_y; then X's band ← v̂ = v̂₀ + δ̂, Rs's band ← Ĥv̂ (Rs the rest's
  *   spectrum), and Q ← αĤv̂ + βx̂ + Ξ (E = Ξ's band, β = 1 − α).
- * W holds eight band-sized scratch arrays; Cd is the DCT-II (K, K); scratch one accumulator a work item. */
+ * W holds seven band-sized scratch arrays (X's band is read again at the end: nothing writes it before); Cd is the
+ * DCT-II (K, K); scratch one accumulator a work item. */
 __kernel void admm_margin_correct(__global REAL2 *X, __global REAL2 *Rs, __global const REAL2 *S,
                                   __global const REAL2 *E, __global REAL2 *Q, __global const REAL2 *Hh,
                                   __global const REAL2 *T, __global const REAL *P, __global const REAL *Pinv,
@@ -129,11 +130,10 @@ __kernel void admm_margin_correct(__global REAL2 *X, __global REAL2 *Rs, __globa
                                   int Hp, int Wq, __local ACC *scratch)
 {
     int plane = rows * cols, N = K * plane;
-    __global REAL2 *v0 = W, *y = W + N, *across = W + 2 * N, *r = W + 3 * N, *z = W + 4 * N, *p = W + 5 * N,
-                   *ap = W + 6 * N, *delta = W + 7 * N;
-    MARGIN_EACH(i) {                              /* v̂₀'s band; y = Ĥv̂₀ − x̂ */
+    __global REAL2 *y = W, *across = W + N, *r = W + 2 * N, *z = W + 3 * N, *p = W + 4 * N, *ap = W + 5 * N,
+                   *delta = W + 6 * N;
+    MARGIN_EACH(i) {                              /* y = Ĥv̂₀ − x̂ */
         REAL2 v = X[band_at(i, rows, cols, Hp, Wq)], t = Hh[band_mod(i, plane)], s = S[i];
-        store_complex(v0, i, v.x, v.y);
         store_complex(y, i, (t.x * v.x - t.y * v.y) - s.x, (t.x * v.y + t.y * v.x) - s.y);
     }
     MARGIN_SYNC;
@@ -194,11 +194,11 @@ __kernel void admm_margin_correct(__global REAL2 *X, __global REAL2 *Rs, __globa
     }
     MARGIN_SYNC;
     MARGIN_EACH(i) {
-        REAL2 d = band_mod(i, cols) ? y[i] : across[i], v = v0[i], t = Hh[band_mod(i, plane)];
+        size_t at = band_at(i, rows, cols, Hp, Wq);
+        REAL2 d = band_mod(i, cols) ? y[i] : across[i], v = X[at], t = Hh[band_mod(i, plane)];
         REAL2 s = S[i], e = E[i];
         REAL vx = v.x + d.x, vy = v.y + d.y;
         REAL hx = t.x * vx - t.y * vy, hy = t.x * vy + t.y * vx;
-        size_t at = band_at(i, rows, cols, Hp, Wq);
         store_complex(X, at, vx, vy);
         store_complex(Rs, at, hx, hy);
         store_complex(Q, i, alpha * hx + beta * s.x + e.x, alpha * hy + beta * s.y + e.y);

@@ -21,7 +21,7 @@ import scipy.fft
 
 from ...backends.base import ints
 
-SCRATCH = 8        # band-sized arrays the correction works in (v̂₀, two temporaries, r, z, p, A·p, δ̂)
+SCRATCH = 7        # band-sized arrays the correction works in (two temporaries, r, z, p, A·p, δ̂)
 
 
 def dct_matrix(n: int) -> np.ndarray:
