@@ -1,7 +1,8 @@
 /* ADMM's passes over the field (clsdcam/algorithms/admm/ derives them; its kernel_steps.py launches them).
  * Cubes are (K, Hp, Wp) C-contiguous; the sensor window (H, W) sits at the field's origin; ξ, the filters f and the
- * x-step's gains g = f/(μ₁ + ‖f‖²) are (K, H, W); b is (H, W). The split arrays η and s hold one cube per active TV
- * axis, in axis order (λ, y, x). Differences along λ stop at the last band; along y and x they are circular. */
+ * x-step's gains g = f·(1/(μ₁ + ‖f‖²)) (terms.x_step_gain) are (K, H, W); b is (H, W). The split arrays η and s
+ * hold one cube per active TV axis, in axis order (λ, y, x). Differences along λ stop at the last band; along y and x
+ * they are circular. */
 
 /* admm_x_step, a reduction (reduce.cl) over the n = Hp·Wp field pixels: with q_k = α·hv_k + (1 − α)·x_k (+ ξ_k on
  * the window) at pixel p, on the sensor window
@@ -178,4 +179,72 @@ __kernel void admm_band_solve(__global REAL2 *X, __global REAL2 *R, __global con
         store_complex(X, at, gx, gy);
         store_complex(R, at, gx * h.x - gy * h.y, gx * h.y + gy * h.x);
     }
+}
+
+/* The type of admm_band_pivots' recursion: ACC where it is double (no -DKAHAN: the device has fp64), else REAL (the
+ * wider of the two). */
+#ifdef KAHAN
+#define PIVOT REAL
+#else
+#define PIVOT ACC
+#endif
+
+/* admm_band_pivots: Thomas's reciprocal pivots of the c-step's systems (a_i·I + e·D_λᵀD_λ)v = r along the K bands,
+ * at each Fourier coefficient i of the plane (one work item each; terms.band_pivots, whose float64 arithmetic this
+ * follows in PIVOT):
+ *   m_0 = 1/(a_i + e·deg_0),   m_k = 1/(a_i + e·deg_k − e²·m_{k−1}),   deg_k = [k > 0] + [k < K − 1]
+ * (D_λᵀD_λ's diagonal, 1, 2, …, 2, 1; 0 for one band), written in REAL into m (K, plane), admm_band_solve's pivots;
+ * a (plane) in PIVOT. 1-D grid over the plane (rounded up, bounds-checked). */
+__kernel void admm_band_pivots(__global REAL *m, __global const PIVOT *a, PIVOT e, int K, long plane)
+{
+    size_t i = get_global_id(0);
+    if (i >= (size_t)plane) return;
+    PIVOT diagonal = a[i], coupled = e * e, pivot = 0;
+    for (int k = 0; k < K; ++k) {
+        PIVOT degree = (PIVOT)((k > 0) + (k + 1 < K));
+        pivot = (PIVOT)1 / (diagonal + e * degree - coupled * pivot);
+        m[k * plane + i] = (REAL)pivot;
+    }
+}
+
+/* Σ_{i<n} (b[i] − a[i])², each difference in REAL and its square in ACC, four independent partial sums (as tv.cl's
+ * sum_abs_diff: what lets the compiler use vector lanes). */
+inline ACC sum_square_diff(__global const REAL *a, __global const REAL *b, int n)
+{
+    ACC s[4] = {0, 0, 0, 0};
+    int i = 0;
+    for (; i + 4 <= n; i += 4)
+        for (int j = 0; j < 4; ++j) {
+            REAL d = b[i + j] - a[i + j];
+            s[j] += (ACC)d * (ACC)d;
+        }
+    for (; i < n; ++i) {
+        REAL d = b[i] - a[i];
+        s[0] += (ACC)d * (ACC)d;
+    }
+    return (s[0] + s[1]) + (s[2] + s[3]);
+}
+
+/* admm_difference_squares, a reduction over the n = K·Hp rows of w (K, Hp, Wp): partial sums of (D_d w)² for each
+ * axis d (output d; 0 for an axis not in mask, bit d), the differences in REAL as the u-step takes them (0 at the
+ * last band, circular along y and x: forward_difference's), their squares in ACC, a row's summed along it and the
+ * rows' compensated (-DKAHAN). One division per row; the inner loops run along the rows. */
+__kernel void admm_difference_squares(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
+                                      __global const REAL *w, int K, int Hp, int Wp, int mask)
+{
+    ACC s0 = 0, c0 = 0, s1 = 0, c1 = 0, s2 = 0, c2 = 0;
+    size_t plane = (size_t)Hp * Wp;
+    FOR_TERMS(row) {
+        size_t k = row / Hp, y = row - k * Hp;
+        __global const REAL *r = w + row * Wp;
+        if ((mask & 1) && k + 1 < (size_t)K) acc_add(&s0, &c0, sum_square_diff(r, r + plane, Wp));
+        if (mask & 2) acc_add(&s1, &c1, sum_square_diff(r, y + 1 < (size_t)Hp ? r + Wp : r - y * Wp, Wp));
+        if (mask & 4) {
+            REAL last = r[0] - r[Wp - 1];
+            acc_add(&s2, &c2, sum_square_diff(r, r + 1, Wp - 1) + (ACC)last * (ACC)last);
+        }
+    }
+    store_partial_of(partial, 0, group_reduce(s0 - c0, scratch, 0));
+    store_partial_of(partial, 1, group_reduce(s1 - c1, scratch, 0));
+    store_partial_of(partial, 2, group_reduce(s2 - c2, scratch, 0));
 }

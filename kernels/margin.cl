@@ -17,94 +17,112 @@ inline size_t band_at(int i, int rows, int cols, int Hp, int Wq)
 }
 
 /* admm_margin_split: before the c-step's solve, from the band D of the data split's spectrum X = rfft2(x⁺ − ξ⁺) and the
- * tracked band Q of the x-step's relaxed point: Ξ⁺ = (Q − D)/2 (or Ξ given in E where the band starts again,
- * restart ≠ 0) into E, and x̂⁺'s band S = D + Ξ⁺. 1-D grid over the band's N = K·rows·cols coefficients. */
+ * tracked band Q of the x-step's relaxed point: Ξ⁺ = (Q − D)/2 into E, and x̂⁺'s band S = D + Ξ⁺. Where the band starts
+ * again (restart ≠ 0) Q is ξ⁺'s whole spectrum, and Ξ⁺ its band. 1-D grid over the band's N = K·rows·cols
+ * coefficients. */
 __kernel void admm_margin_split(__global const REAL2 *X, __global const REAL2 *Q, __global REAL2 *S,
                                 __global REAL2 *E, int restart, int N, int rows, int cols, int Hp, int Wq)
 {
     int i = get_global_id(0);
     if (i >= N) return;
-    REAL2 d = X[band_at(i, rows, cols, Hp, Wq)];
+    size_t at = band_at(i, rows, cols, Hp, Wq);
+    REAL2 d = X[at];
     REAL ex, ey;
     if (restart) {
-        REAL2 e = E[i];
+        REAL2 e = Q[at];
         ex = e.x;
         ey = e.y;
     } else {
         REAL2 q = Q[i];
         ex = (q.x - d.x) * (REAL)0.5;
         ey = (q.y - d.y) * (REAL)0.5;
-        store_complex(E, i, ex, ey);
     }
+    store_complex(E, i, ex, ey);
     store_complex(S, i, d.x + ex, d.y + ey);
 }
 
-/* The loops below run over the band's coefficients in one work group: item l takes i = l, l + L, … < N, and a
- * barrier separates every pass that reads what another item wrote. */
-#define MARGIN_EACH(i) for (int i = get_local_id(0); i < N; i += get_local_size(0))
-#define MARGIN_SYNC barrier(CLK_GLOBAL_MEM_FENCE | CLK_LOCAL_MEM_FENCE)
-
-/* out = Cd·in along λ at each (r, c) (the orthonormal DCT-II's modes), or Cdᵀ·in with transpose (its inverse). */
-inline void modes_along(__global const REAL2 *in, __global REAL2 *out, __global const REAL *Cd, int transpose,
-                        int N, int K, int plane)
+/* z = Cd·(Ĥv̂₀ − x̂) along λ at each (r, c) (the orthonormal DCT-II's modes, Cd (K, K)), X v̂₀'s spectrum and S x̂'s
+ * band: the masked system's residual before μ₁Ĥ*(I − M), in the modes. 1-D grid over the band's N coefficients. */
+__kernel void admm_margin_residual(__global const REAL2 *X, __global const REAL2 *S, __global const REAL2 *Hh,
+                                   __global const REAL *Cd, __global REAL2 *z, int K, int rows, int cols, int Hp,
+                                   int Wq)
 {
-    MARGIN_EACH(i) {
-        int j = i / plane, rc = band_mod(i, plane);
-        REAL sx = 0, sy = 0;
-        for (int k = 0; k < K; ++k) {
-            REAL m = transpose ? Cd[k * K + j] : Cd[j * K + k];
-            REAL2 z = in[k * plane + rc];
-            sx += m * z.x;
-            sy += m * z.y;
-        }
-        store_complex(out, i, sx, sy);
+    int i = get_global_id(0), plane = rows * cols;
+    if (i >= K * plane) return;
+    int j = i / plane, rc = band_mod(i, plane);
+    REAL2 t = Hh[rc];
+    REAL sx = 0, sy = 0;
+    for (int k = 0; k < K; ++k) {
+        REAL2 v = X[band_at(k * plane + rc, rows, cols, Hp, Wq)], s = S[k * plane + rc];
+        REAL m = Cd[j * K + k];
+        sx += m * ((t.x * v.x - t.y * v.y) - s.x);
+        sy += m * ((t.x * v.y + t.y * v.x) - s.y);
     }
-    MARGIN_SYNC;
+    store_complex(z, i, sx, sy);
 }
 
-/* out = μ₁Ĥ*(I − M)·z on the band, M = M_y ⊗ M_x the window's mask (margin.py's T): the columns k_x < 0 of z from
- * its Hermitian symmetry (z_{−k} = conj z_k), then (z M_x) along the columns into `across`, then M_y along the rows.
- * T is μ₁conj(Ĥ)'s band (rows, cols), My (rows, rows), Mx (2·cols − 1, cols) with row c′ for k_x = c′ − (cols − 1). */
-inline void pulled(__global const REAL2 *z, __global REAL2 *out, __global REAL2 *across, __global const REAL2 *T,
-                   __global const REAL2 *My, __global const REAL2 *Mx, int N, int rows, int cols)
+/* The per-mode passes below run over one mode's plane of n = rows·cols coefficients in local memory, in one work
+ * group: item l takes i = l, l + L, … < n, and a barrier separates every pass that reads what another item wrote. */
+#define PLANE_EACH(i) for (int i = get_local_id(0); i < n; i += get_local_size(0))
+
+inline void store_local(__local REAL2 *z, int i, REAL re, REAL im) { vstore2((REAL2)(re, im), i, (__local REAL *)z); }
+
+/* out = μ₁Ĥ*(I − M)·(Ĥ if `transfer`)·z on one mode's plane, M = M_y ⊗ M_x the window's mask (margin.py's T): the
+ * columns k_x < 0 of z from its Hermitian symmetry (z_{−k} = conj z_k), then (z M_x) along the columns into `across`,
+ * then M_y along the rows. T is μ₁conj(Ĥ)'s band and Hh Ĥ's (rows, cols), My (rows, rows), Mx (2·cols − 1, cols)
+ * with row c′ for k_x = c′ − (cols − 1); `y` holds Ĥz when `transfer`. */
+inline void pulled(__local const REAL2 *z, __local REAL2 *out, __local REAL2 *y, __local REAL2 *across,
+                   __global const REAL2 *T, __global const REAL2 *Hh, __global const REAL2 *My,
+                   __global const REAL2 *Mx, int transfer, int rows, int cols)
 {
-    MARGIN_EACH(i) {
-        int kr = i / cols, c = band_mod(i, cols), r = band_mod(kr, rows), flipped = (kr - r) + (rows - 1 - r);
+    int n = rows * cols;
+    __local const REAL2 *in = z;
+    if (transfer) {
+        PLANE_EACH(i) {
+            REAL2 t = Hh[i], v = z[i];
+            store_local(y, i, t.x * v.x - t.y * v.y, t.x * v.y + t.y * v.x);
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+        in = y;
+    }
+    PLANE_EACH(i) {
+        int r = i / cols, c = band_mod(i, cols);
         REAL sx = 0, sy = 0;
         for (int cc = 0; cc < 2 * cols - 1; ++cc) {
             REAL2 m = Mx[cc * cols + c], w;
             if (cc >= cols - 1) {
-                w = z[kr * cols + cc - (cols - 1)];
+                w = in[r * cols + cc - (cols - 1)];
             } else {
-                w = z[flipped * cols + (cols - 1 - cc)];
+                w = in[(rows - 1 - r) * cols + (cols - 1 - cc)];
                 w.y = -w.y;
             }
             sx += w.x * m.x - w.y * m.y;
             sy += w.x * m.y + w.y * m.x;
         }
-        store_complex(across, i, sx, sy);
+        store_local(across, i, sx, sy);
     }
-    MARGIN_SYNC;
-    MARGIN_EACH(i) {
-        int kr = i / cols, c = band_mod(i, cols), r = band_mod(kr, rows), first = (kr - r) * cols;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    PLANE_EACH(i) {
+        int r = i / cols, c = band_mod(i, cols);
         REAL sx = 0, sy = 0;
         for (int rr = 0; rr < rows; ++rr) {
-            REAL2 m = My[r * rows + rr], a = across[first + rr * cols + c];
+            REAL2 m = My[r * rows + rr], a = across[rr * cols + c];
             sx += m.x * a.x - m.y * a.y;
             sy += m.x * a.y + m.y * a.x;
         }
-        REAL2 v = z[i], t = T[band_mod(i, rows * cols)];
+        REAL2 v = in[i], t = T[i];
         REAL dx = v.x - sx, dy = v.y - sy;
-        store_complex(out, i, t.x * dx - t.y * dy, t.x * dy + t.y * dx);
+        store_local(out, i, t.x * dx - t.y * dy, t.x * dy + t.y * dx);
     }
-    MARGIN_SYNC;
+    barrier(CLK_LOCAL_MEM_FENCE);
 }
 
-/* ⟨a, b⟩ of the real fields whose half spectra's bands a and b are: Σ w_c·Re(conj(a)·b), w_c = 1 at c = 0, else 2. */
-inline ACC band_dot(__global const REAL2 *a, __global const REAL2 *b, __local ACC *scratch, int N, int cols)
+/* ⟨a, b⟩ of the real fields whose half spectra's planes a and b are: Σ w_c·Re(conj(a)·b), w_c = 1 at c = 0, else 2;
+ * the group's total, in ACC. */
+inline ACC plane_dot(__local const REAL2 *a, __local const REAL2 *b, __local ACC *scratch, int n, int cols)
 {
     ACC s = 0, comp = 0;
-    MARGIN_EACH(i) {
+    PLANE_EACH(i) {
         REAL2 x = a[i], y = b[i];
         REAL w = band_mod(i, cols) ? (REAL)2 : (REAL)1;
         acc_add(&s, &comp, (ACC)(w * x.x) * (ACC)y.x + (ACC)(w * x.y) * (ACC)y.y);
@@ -114,96 +132,103 @@ inline ACC band_dot(__global const REAL2 *a, __global const REAL2 *b, __local AC
     return total;
 }
 
-/* admm_margin_correct: after the c-step's solve, the correction δ̂ of v̂₀'s band (X's) and what follows from it, in
- * one work group (global size = local size):
- *   r₀ = μ₁Ĥ*(I − M)(Ĥv̂₀ − x̂) in the modes along λ (S = x̂'s band), then `steps` conjugate gradients on
- *   ΠAΠ·δ̂ = r₀ preconditioned by P⁻¹ (A·p = P·p − μ₁Ĥ*(I − M)Ĥ·p, P and P⁻¹ diagonal there), δ̂ back in the bands
- *   with its column k_x = 0 made Hermitian along k_y; then X's band ← v̂ = v̂₀ + δ̂, Rs's band ← Ĥv̂ (Rs the rest's
- *   spectrum), and Q ← αĤv̂ + βx̂ + Ξ (E = Ξ's band, β = 1 − α).
- * W holds seven band-sized scratch arrays (X's band is read again at the end: nothing writes it before); Cd is the
- * DCT-II (K, K); scratch one accumulator a work item. */
-__kernel void admm_margin_correct(__global REAL2 *X, __global REAL2 *Rs, __global const REAL2 *S,
-                                  __global const REAL2 *E, __global REAL2 *Q, __global const REAL2 *Hh,
-                                  __global const REAL2 *T, __global const REAL *P, __global const REAL *Pinv,
-                                  __global const REAL2 *My, __global const REAL2 *Mx, __global const REAL *Cd,
-                                  __global REAL2 *W, REAL alpha, REAL beta, int steps, int K, int rows, int cols,
-                                  int Hp, int Wq, __local ACC *scratch)
+/* admm_margin_cg: `steps` conjugate gradients on ΠAΠ·δ̂ = r₀ in the modes along λ, one work group a mode j (its
+ * own step lengths: A is block diagonal over the modes), preconditioned by P⁻¹: r₀ = μ₁Ĥ*(I − M)·Z (Z the mode's
+ * plane of admm_margin_residual's output), A·p = P·p − μ₁Ĥ*(I − M)Ĥ·p (P and P⁻¹ diagonal there); δ̂ into D.
+ * L holds the seven plane-sized arrays (r, z, p, A·p, δ̂ and two temporaries), scratch one accumulator an item. */
+__kernel void admm_margin_cg(__global const REAL2 *Z, __global REAL2 *D, __global const REAL2 *Hh,
+                             __global const REAL2 *T, __global const REAL *P, __global const REAL *Pinv,
+                             __global const REAL2 *My, __global const REAL2 *Mx, int steps, int rows, int cols,
+                             __local REAL2 *L, __local ACC *scratch)
 {
-    int plane = rows * cols, N = K * plane;
-    __global REAL2 *y = W, *across = W + N, *r = W + 2 * N, *z = W + 3 * N, *p = W + 4 * N, *ap = W + 5 * N,
-                   *delta = W + 6 * N;
-    MARGIN_EACH(i) {                              /* y = Ĥv̂₀ − x̂ */
-        REAL2 v = X[band_at(i, rows, cols, Hp, Wq)], t = Hh[band_mod(i, plane)], s = S[i];
-        store_complex(y, i, (t.x * v.x - t.y * v.y) - s.x, (t.x * v.y + t.y * v.x) - s.y);
-    }
-    MARGIN_SYNC;
-    modes_along(y, z, Cd, 0, N, K, plane);
-    pulled(z, r, across, T, My, Mx, N, rows, cols);        /* r₀ */
-    MARGIN_EACH(i) {
+    int n = rows * cols;
+    size_t first = (size_t)get_group_id(0) * n;
+    __local REAL2 *r = L, *z = L + n, *p = L + 2 * n, *ap = L + 3 * n, *delta = L + 4 * n, *y = L + 5 * n,
+                  *across = L + 6 * n;
+    PLANE_EACH(i) y[i] = Z[first + i];
+    barrier(CLK_LOCAL_MEM_FENCE);
+    pulled(y, r, y, across, T, Hh, My, Mx, 0, rows, cols);          /* r₀ */
+    PLANE_EACH(i) {
         REAL2 g = r[i];
-        REAL m = Pinv[i];
-        store_complex(z, i, g.x * m, g.y * m);
-        store_complex(p, i, g.x * m, g.y * m);
-        store_complex(delta, i, 0, 0);
+        REAL m = Pinv[first + i];
+        store_local(z, i, g.x * m, g.y * m);
+        store_local(p, i, g.x * m, g.y * m);
+        store_local(delta, i, 0, 0);
     }
-    MARGIN_SYNC;
-    ACC rz = band_dot(r, z, scratch, N, cols);
+    barrier(CLK_LOCAL_MEM_FENCE);
+    ACC rz = plane_dot(r, z, scratch, n, cols);
     for (int step = 0; step < steps && rz > 0; ++step) {
-        MARGIN_EACH(i) {                          /* y = Ĥp */
-            REAL2 t = Hh[band_mod(i, plane)], v = p[i];
-            store_complex(y, i, t.x * v.x - t.y * v.y, t.x * v.y + t.y * v.x);
-        }
-        MARGIN_SYNC;
-        pulled(y, ap, across, T, My, Mx, N, rows, cols);
-        MARGIN_EACH(i) {                          /* ap = P·p − μ₁Ĥ*(I − M)Ĥ·p */
+        pulled(p, ap, y, across, T, Hh, My, Mx, 1, rows, cols);    /* μ₁Ĥ*(I − M)Ĥ·p */
+        PLANE_EACH(i) {                                             /* ap = P·p − μ₁Ĥ*(I − M)Ĥ·p */
             REAL2 v = p[i], u = ap[i];
-            REAL m = P[i];
-            store_complex(ap, i, m * v.x - u.x, m * v.y - u.y);
+            REAL m = P[first + i];
+            store_local(ap, i, m * v.x - u.x, m * v.y - u.y);
         }
-        MARGIN_SYNC;
-        REAL length = (REAL)(rz / band_dot(p, ap, scratch, N, cols));
-        MARGIN_EACH(i) {
+        barrier(CLK_LOCAL_MEM_FENCE);
+        REAL length = (REAL)(rz / plane_dot(p, ap, scratch, n, cols));
+        PLANE_EACH(i) {
             REAL2 d = delta[i], v = p[i];
-            store_complex(delta, i, d.x + length * v.x, d.y + length * v.y);
+            store_local(delta, i, d.x + length * v.x, d.y + length * v.y);
         }
-        MARGIN_SYNC;
+        barrier(CLK_LOCAL_MEM_FENCE);
         if (step + 1 == steps) break;
-        MARGIN_EACH(i) {
+        PLANE_EACH(i) {
             REAL2 g = r[i], u = ap[i];
-            REAL m = Pinv[i], gx = g.x - length * u.x, gy = g.y - length * u.y;
-            store_complex(r, i, gx, gy);
-            store_complex(z, i, gx * m, gy * m);
+            REAL m = Pinv[first + i], gx = g.x - length * u.x, gy = g.y - length * u.y;
+            store_local(r, i, gx, gy);
+            store_local(z, i, gx * m, gy * m);
         }
-        MARGIN_SYNC;
+        barrier(CLK_LOCAL_MEM_FENCE);
         ACC last = rz;
-        rz = band_dot(r, z, scratch, N, cols);
+        rz = plane_dot(r, z, scratch, n, cols);
         REAL ratio = (REAL)(rz / last);
-        MARGIN_EACH(i) {
+        PLANE_EACH(i) {
             REAL2 g = z[i], v = p[i];
-            store_complex(p, i, g.x + ratio * v.x, g.y + ratio * v.y);
+            store_local(p, i, g.x + ratio * v.x, g.y + ratio * v.y);
         }
-        MARGIN_SYNC;
+        barrier(CLK_LOCAL_MEM_FENCE);
     }
-    modes_along(delta, y, Cd, 1, N, K, plane);             /* δ̂ in the bands */
-    MARGIN_EACH(i) {                              /* column k_x = 0 made Hermitian along k_y, into across */
-        if (band_mod(i, cols) == 0) {
-            int kr = i / cols, r0 = band_mod(kr, rows);
-            REAL2 a = y[i], b = y[(kr - r0 + rows - 1 - r0) * cols];
-            store_complex(across, i, (a.x + b.x) * (REAL)0.5, (a.y - b.y) * (REAL)0.5);
-        }
-    }
-    MARGIN_SYNC;
-    MARGIN_EACH(i) {
-        size_t at = band_at(i, rows, cols, Hp, Wq);
-        REAL2 d = band_mod(i, cols) ? y[i] : across[i], v = X[at], t = Hh[band_mod(i, plane)];
-        REAL2 s = S[i], e = E[i];
-        REAL vx = v.x + d.x, vy = v.y + d.y;
-        REAL hx = t.x * vx - t.y * vy, hy = t.x * vy + t.y * vx;
-        store_complex(X, at, vx, vy);
-        store_complex(Rs, at, hx, hy);
-        store_complex(Q, i, alpha * hx + beta * s.x + e.x, alpha * hy + beta * s.y + e.y);
+    PLANE_EACH(i) {
+        REAL2 d = delta[i];
+        store_complex(D, first + i, d.x, d.y);
     }
 }
 
-#undef MARGIN_EACH
-#undef MARGIN_SYNC
+/* admm_margin_apply: δ̂ = Cdᵀ·D back in the bands, its column k_x = 0 made Hermitian along k_y; then X's band ← v̂ =
+ * v̂₀ + δ̂, Rs's band ← Ĥv̂ (Rs the rest's spectrum), and Q ← αĤv̂ + βx̂ + Ξ (S x̂'s band, E Ξ's, β = 1 − α).
+ * 1-D grid over the band's N coefficients. */
+__kernel void admm_margin_apply(__global REAL2 *X, __global REAL2 *Rs, __global const REAL2 *S,
+                                __global const REAL2 *E, __global REAL2 *Q, __global const REAL2 *D,
+                                __global const REAL2 *Hh, __global const REAL *Cd, REAL alpha, REAL beta, int K,
+                                int rows, int cols, int Hp, int Wq)
+{
+    int i = get_global_id(0), plane = rows * cols;
+    if (i >= K * plane) return;
+    int k = i / plane, rc = band_mod(i, plane), r = rc / cols, c = band_mod(rc, cols);
+    int mirror = (rows - 1 - r) * cols;           /* (−k_y, 0), read where c = 0 */
+    REAL dx = 0, dy = 0, bx = 0, by = 0;
+    for (int j = 0; j < K; ++j) {
+        REAL m = Cd[j * K + k];
+        REAL2 d = D[j * plane + rc];
+        dx += m * d.x;
+        dy += m * d.y;
+        if (c == 0) {
+            REAL2 e = D[j * plane + mirror];
+            bx += m * e.x;
+            by += m * e.y;
+        }
+    }
+    if (c == 0) {
+        dx = (dx + bx) * (REAL)0.5;
+        dy = (dy - by) * (REAL)0.5;
+    }
+    size_t at = band_at(i, rows, cols, Hp, Wq);
+    REAL2 v = X[at], t = Hh[rc], s = S[i], e = E[i];
+    REAL vx = v.x + dx, vy = v.y + dy;
+    REAL hx = t.x * vx - t.y * vy, hy = t.x * vy + t.y * vx;
+    store_complex(X, at, vx, vy);
+    store_complex(Rs, at, hx, hy);
+    store_complex(Q, i, alpha * hx + beta * s.x + e.x, alpha * hy + beta * s.y + e.y);
+}
+
+#undef PLANE_EACH

@@ -22,7 +22,8 @@ from clsdcam.sim import simulate
 from clsdcam.solve.solver import Settings, Solver
 from clsdcam.solve.state import SolverState
 from clsdcam.backends import blocks
-from clsdcam.algorithms.admm.host_steps import Splitting, difference, difference_adjoint_add, sweep_bands
+from clsdcam.algorithms.admm.host_steps import (Splitting, difference, difference_adjoint_add, difference_rms,
+                                               sweep_bands)
 from clsdcam.algorithms.admm.jit_steps import JitSplitting
 from clsdcam.algorithms.admm.terms import TERMS_KEY, CalibrationTerms, Penalties, SplitState, band_degrees, band_pivots
 
@@ -383,7 +384,7 @@ def test_the_balance_sets_each_axis_threshold_from_the_iterates_differences_and_
     assert len(set(new.tv_balance)) == 3 and all(b != 1.0 for b in new.tv_balance)
     assert np.allclose(state.s + state.eta, u, rtol=0, atol=rounding)
     assert state.penalties is new and split.penalties is new
-    assert split._pivots is split.terms.for_penalties(new, split.axes)[2] and split.coupling == new.tv_along(0)
+    assert split._pivots is split.terms.for_penalties(new, split.axes).pivots and split.coupling == new.tv_along(0)
 
 
 def test_a_new_nonneg_penalty_keeps_the_unscaled_dual_and_the_right_hand_side_it_implies(tiny):
@@ -400,7 +401,7 @@ def test_a_new_nonneg_penalty_keeps_the_unscaled_dual_and_the_right_hand_side_it
     assert np.allclose(state.rest, new.nonneg * (state.w - state.rho), rtol=1e-12, atol=1e-14)
     assert all(np.array_equal(getattr(state, name), value) for name, value in before.items())
     assert state.penalties is new and split.penalties is new
-    assert split._pivots is split.terms.for_penalties(new, split.axes)[2]
+    assert split._pivots is split.terms.for_penalties(new, split.axes).pivots
 
 
 def test_a_new_data_penalty_keeps_the_unscaled_dual_and_the_data_term_it_implies(tiny):
@@ -418,7 +419,7 @@ def test_a_new_data_penalty_keeps_the_unscaled_dual_and_the_data_term_it_implies
     split_x[:, :h, :w] -= state.xi
     assert np.allclose(data_input(split, state), split_x, rtol=1e-12, atol=1e-14)
     assert all(np.array_equal(getattr(state, name), value) for name, value in kept.items())
-    assert split._gain is split.terms.for_penalties(new, split.axes)[0]
+    assert split._gain is split.terms.for_penalties(new, split.axes).gain
 
 
 @pytest.mark.parametrize("penalty", ["nonneg", "every"])
@@ -461,7 +462,7 @@ def test_the_balance_reads_the_rms_of_the_differences_along_each_active_axis():
         differences = {0: np.concatenate([np.diff(exact, axis=0), np.zeros((1,) + w.shape[1:])]),
                        1: np.roll(exact, -1, axis=1) - exact, 2: np.roll(exact, -1, axis=2) - exact}
         for axes in ([0, 1, 2], [1, 2]):
-            rms = balance.difference_rms(types.SimpleNamespace(axes=axes), w)
+            rms = difference_rms(types.SimpleNamespace(axes=axes), w)
             assert sorted(rms) == axes
             for axis in axes:
                 assert rms[axis] == pytest.approx(np.sqrt(np.mean(differences[axis] ** 2)), rel=rel, abs=0.0)
@@ -472,7 +473,7 @@ def test_the_balance_holds_each_axis_within_its_range_and_leaves_a_flat_axis(tin
     scene of a few points within [FLOOR_FEW_POINTS, BALANCE_RANGE], the floor the balance then takes."""
     model, split = tiny
     w = np.broadcast_to(RNG.random(split.shape[1:]), split.shape).copy()
-    betas = balance.balanced_penalties(split, balance.difference_rms(split, w), balance.THRESHOLD_OVER_RMS).tv_balance
+    betas = balance.balanced_penalties(split, difference_rms(split, w), balance.THRESHOLD_OVER_RMS).tv_balance
     assert betas[0] == split.penalties.tv_balance[0]
     tiny_rms = balance.balanced_penalties(split, {1: 1e-12, 2: 1e12}, balance.THRESHOLD_OVER_RMS).tv_balance
     assert tiny_rms[1:] == (balance.BALANCE_RANGE, 1.0 / balance.BALANCE_RANGE)
@@ -515,9 +516,9 @@ def test_a_solver_builds_the_calibrations_terms_once_and_a_fresh_solver_gives_th
     solver = Solver(leds.calibration, settings=Settings(iters=4, algorithm="admm"))
     first = solver.solve(leds.measurement)
     terms = solver.shared[TERMS_KEY]
-    pivots = terms._last[1][2]
+    pivots = terms._last[1].pivots
     second = solver.solve(0.5 * leds.measurement)
-    assert solver.shared[TERMS_KEY] is terms and terms._last[1][2] is pivots
+    assert solver.shared[TERMS_KEY] is terms and terms._last[1].pivots is pivots
     fresh = Solver(leds.calibration, settings=Settings(iters=4, algorithm="admm")).solve(0.5 * leds.measurement)
     assert np.array_equal(second.cube, fresh.cube) and not np.array_equal(first.cube, second.cube)
 

@@ -66,10 +66,23 @@ def test_on_the_whole_spectrum_the_system_is_the_masked_c_steps():
     assert np.abs(system._precondition(unmasked) - modes).max() < 1e-12 * np.abs(spectrum).max()
     u = nyquist_free(split.field_shape, (split.n_bands,))
     other = band.take(scipy.fft.rfft2(u))
-    assert system._dot(spectrum, other) == pytest.approx(np.prod(split.field_shape) * np.sum(v * u))
-    assert system._dot(modes, system._modes(other)) == pytest.approx(system._dot(spectrum, other))
+    assert system._dots(spectrum, other).sum() == pytest.approx(np.prod(split.field_shape) * np.sum(v * u))
+    assert system._dots(modes, system._modes(other)).sum() == pytest.approx(system._dots(spectrum, other).sum())
     r = system._apply(system._modes(other))
     assert np.abs(system._apply(system._solve(r)) - r).max() < 1e-9 * np.abs(r).max()
+
+
+def test_each_mode_has_its_own_gradients():
+    """Three steps on a residual in two modes are the sum of three steps on each mode's part alone (one set of step
+    lengths for the whole band would mix them), and a mode with no residual stays at zero."""
+    _, split = camera_steps(Splitting, RNG, shape=(8, 10))
+    system = MarginCorrection(split, 3)
+    r = system._apply(system._modes(system.band.take(scipy.fft.rfft2(RNG.standard_normal(split.shape)))))
+    first, second = np.zeros_like(r), np.zeros_like(r)
+    first[0], second[1] = r[0], 100 * r[1]
+    both = system._solve(first + second)
+    assert np.abs(both - system._solve(first) - system._solve(second)).max() < 1e-12 * np.abs(both).max()
+    assert not both[2:].any() and np.abs(both[:2]).min(axis=(1, 2)).all()
 
 
 def relaxed_steps(shape=(8, 10), steps=3):

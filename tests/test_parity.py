@@ -567,6 +567,64 @@ def test_admm_band_solve_matches_numpy_on_one_and_two_bands(dtype, n_bands, path
     assert_band_solves_match(pair, random_states(pair, backend)[2], backend, 2e-6 if dtype == "float32" else 1e-12)
 
 
+# the precisions of ADMM's one-off kernels: (dtype, kahan) with the float64 accumulators a device with fp64 has, and
+# the compensated float32 ones of a device without
+ONE_OFF_PRECISIONS = dict([(dtype, (dtype, None)) for dtype in DTYPES] + [("float32-kahan", ("float32", True))])
+
+
+@pytest.mark.parametrize("n_bands", [1, 2, 64])
+@pytest.mark.parametrize("dtype, kahan", list(ONE_OFF_PRECISIONS.values()), ids=list(ONE_OFF_PRECISIONS))
+def test_admm_band_pivots_kernel_matches_band_pivots(dtype, kahan, n_bands, path):
+    """admm_band_pivots, the c-step's pivots formed on the device, against :func:`band_pivots` (the host's float64
+    recursion) from the same diagonal a and coupling e, for the camera's penalties (e·m_j below 0.16) and, where the
+    recursion runs in float64, for λ's penalty up to 66 times a (the last pivot near the system's singularity); on one
+    band (no coupling), two (no interior band) and 64; the host's recursion is not run. In float64 (the accumulators
+    of a device with fp64) the kernel's arithmetic is the host's, so each pivot is the host's rounded once to the
+    working precision: within half a unit in its last place (equal, measured). In float32 (a device without fp64)
+    each step rounds about six times (the division up to 2.5 units) and passes its error on weighted by
+    (e·m_j)(e·m_{j−1}) < 0.03 here: within the elementwise rule 1e-6 (1.3e-7 measured); near the singularity the
+    error grows with the system's conditioning (2.6e-6 measured at 66), which no rounding rule bounds, so that case
+    is not run there. Without its e²·m_{j−1} term a pivot is up to 2 % off with the camera's penalties."""
+    from clsdcam.algorithms.admm.terms import Penalties, band_pivots
+
+    backend = opencl(dtype, PATH_BACKEND[path], kahan)
+    split = admm_pair(dtype, backend, n_bands=n_bands)[1]
+    in_float64 = np.promote_types(backend.kernels.acc, dtype) == np.float64
+    strong = Penalties(data=0.01, tv=0.7, nonneg=0.01, tv_balance=(64.0, 1.7, 1.2))
+    for penalties in [split.penalties] + ([strong] if in_float64 else []):
+        split.set_penalties(penalties)
+        terms = split.terms.for_penalties(penalties, split.axes)
+        want = band_pivots(terms.diagonal, terms.coupling, n_bands)
+        tolerance = np.finfo(dtype).eps / 2 if in_float64 else 1e-6
+        assert terms.coupling > 0 and "pivots" not in vars(terms)        # the host's recursion not run
+        assert np.max(np.abs(backend.to_host(split._pivots) - want) / want) <= tolerance
+
+
+@pytest.mark.parametrize("axes", ["every axis", "not λ", "x only"])
+@pytest.mark.parametrize("dtype, kahan, group", [(*precision, None) for precision in ONE_OFF_PRECISIONS.values()]
+                         + [("float32", None, 4)], ids=list(ONE_OFF_PRECISIONS) + ["float32-groups-of-4"])
+def test_admm_difference_rms_kernel_matches_the_hosts(dtype, kahan, group, axes, path, monkeypatch):
+    """The balance's rms(D_d w) on the device (admm_difference_squares, one reduction over w) against the host's
+    :func:`difference_rms` from the same non-negative w, for TV on every axis or on some: along λ the last band's
+    difference 0, along y and x circular. The host sums each band's squares by a float32 dot product (168 terms
+    here) and the kernel in its accumulators (a row's 14 plainly, the rows' compensated without fp64): the
+    reductions' rule 1e-5 (float64: 1e-12). The kernel's 60 rows are fewer than a group: in groups of 4 several
+    groups share them and each work item sums several, as at full size. A circular λ would raise its RMS by 13 %
+    here, a y or an x that stops at the edge lower theirs by 5 % and 4 %."""
+    from types import SimpleNamespace
+
+    backend = opencl(dtype, PATH_BACKEND[path], kahan)
+    if group is not None:
+        monkeypatch.setattr(backend.kernels, "local_1d", group)
+    pair = admm_pair(dtype, backend, TV_AXES[axes])
+    w = (np.random.default_rng(8).random(pair[0].shape) ** 3).astype(dtype)
+    want = pair[0].difference_rms(SimpleNamespace(w=w))
+    got = pair[1].difference_rms(SimpleNamespace(w=backend.to_device(w)))
+    assert sorted(got) == sorted(want) == pair[0].axes
+    tolerance = 1e-5 if dtype == "float32" else 1e-12
+    assert all(got[axis] == pytest.approx(want[axis], rel=tolerance, abs=0.0) for axis in want)
+
+
 def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_memory):
     """float32 ADMM (TV and L1, the margin's correction on) on a simulated scene, every new device array starting as
     NaN (a GPU's garbage): the cube agrees with NumPy's to 1e-4 (relative L2) after as many iterations as FISTA's
@@ -628,25 +686,25 @@ def test_admm_kernels_track_the_margins_band_of_the_x_steps_relaxed_point(engine
     assert len(moves) == 12 and min(moves) > 0
 
 
-@pytest.mark.parametrize("restart", [False, True], ids=["tracked", "from xi"])
+@pytest.mark.parametrize("restart", [False, True], ids=["tracked", "xi-transformed"])
 @pytest.mark.parametrize("dtype, kahan, group", [("float32", None, None), ("float32", True, None),
                                                   ("float64", None, None), ("float32", None, 16)],
                          ids=["float32", "float32-kahan", "float64", "float32-groups-of-16"])
 def test_admm_margin_correction_kernels_match_the_hosts(dtype, kahan, group, restart, path, monkeypatch):
-    """The margin's two kernels against :class:`MarginCorrection` on the host, from random spectra: x̂'s band from
+    """The margin's kernels against :class:`MarginCorrection` on the host, from random spectra: x̂'s band from
     the data split's band D and the tracked Q (or from ξ's transform, where the band starts again), then v̂ = v̂₀ + δ̂
     and Ĥv̂ written into the two spectra's bands (the rest of each untouched) and the next Q. The correction's ten
     conjugate-gradient steps carry rounding through their inner products: 5e-6 of the largest coefficient in float32
     (5–10e-7 measured), with float64 accumulators or compensated float32 ones (a device without fp64), 1e-13 in float64
-    (1e-15 measured); the correction itself is a tenth or more of v̂₀'s band here, so a missing one fails. The band's
-    385 coefficients are fewer than the largest group, so each item takes one: in a group of 16 each takes many, as
-    at full size."""
+    (1e-15 measured); the correction itself is a tenth or more of v̂₀'s band here, so a missing one fails. A mode's
+    plane of 77 coefficients is smaller than the largest group, so each item takes one (as at full size, 150 in a group
+    of 256 on a GPU): in a group of 16 each takes several."""
     from types import SimpleNamespace
 
     backend, rng = opencl(dtype, PATH_BACKEND[path], kahan), np.random.default_rng(12)
     if group is not None:
-        monkeypatch.setattr(backend.kernels, "one_group", partial(type(backend.kernels).one_group, backend.kernels,
-                                                                  cap=group))
+        monkeypatch.setattr(backend.kernels, "row_groups", partial(type(backend.kernels).row_groups, backend.kernels,
+                                                                   cap=group))
     split = admm_pair(dtype, backend, n_bands=5)[1]
     device, host, band = split.margin, split.margin.correction, split.margin.correction.band
     spectrum = (split.n_bands, split.field_shape[0], split.field_shape[1] // 2 + 1)

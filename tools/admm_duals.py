@@ -51,7 +51,7 @@ def fixed_point_duals(split, state, w: np.ndarray, kind: int = EVERY_DUAL) -> No
         state.s[i] = d - state.eta[i]
     pushed = np.zeros_like(w)
     pushed[:, :h, :wd] = state.xi
-    _, data_transfer, _ = split.terms.for_penalties(p, split.axes)        # μ₁conj(Ĥ), the c-step's own
+    data_transfer = split.terms.for_penalties(p, split.axes).data_transfer        # μ₁conj(Ĥ), the c-step's own
     gradient = scipy.fft.irfft2(scipy.fft.rfft2(pushed) * data_transfer, s=split.field_shape)
     for i, axis in enumerate(split.axes):
         difference_adjoint_add(state.eta[i], axis, p.tv_along(axis), gradient)

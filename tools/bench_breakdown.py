@@ -24,8 +24,8 @@ parts, per iteration:
 
 and the one-off parts, as a share of the whole solve: moves between spaces (building a subspace's filters,
 mapping the iterates), power iterations for L, the prior weight's re-estimation, ADMM's set-up (its splitting,
-the penalties' terms, the start's splits), ADMM's balance at its iteration 30 (the iterate read to the host, the RMS of
-its differences, the duals rescaled; the new penalties' terms count as set-up). The FFT floor is the iteration's
+the penalties' terms, the start's splits), ADMM's balance at its iteration 30 (the RMS of its iterate's differences,
+host or device, the duals rescaled; the new penalties' terms count as set-up). The FFT floor is the iteration's
 own 4r real 2-D transforms of the field (2 rfft2 + 2 irfft2 of r bands, r the rank the solve ended in; K in band
 space), measured in the same run (``bench_iteration.floor_timer``: pocketfft on the host, so NumPy's only). A
 row's figure is seconds per iteration over the whole solve, so a configuration that starts in band space

@@ -241,7 +241,8 @@ class Programs(Protocol):
     """Optional: the backend's kernel programs for code outside it. ``kernels`` launches a kernel of ``kernels/*.cl``
     by name in one of the launch shapes (``grid1(name, n, *args)``, ``grid2(name, n, rows, *args)``,
     ``grid3(name, (B, H, W), *args)``, ``reduce(name, n, *args, outputs=1)`` → per-group partials on the host, and
-    ``one_group(name, n, *args)``: one work group that loops over n elements itself)."""
+    ``row_groups(name, rows, n, *args, local=())``: a work group a row, each looping over its row's n elements
+    itself; ``upload(host)`` a device copy of a host array in its own dtype)."""
 
     kernels: Any
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pyopencl as cl
+import pyopencl.array as cla
 
 from .cl_devices import has_fp64, is_cpu
 
@@ -27,7 +28,6 @@ LOCAL_1D = 256        # work-group size of 1-D launches and reductions on GPUs (
 LOCAL_CPU = 1024      # CPUs (PoCL): large groups amortise the per-group scheduling cost
 
 PROGRAM_CACHE = 8     # built programs kept: (context, dtype, accumulator) combinations in use
-ONE_GROUP = 1024      # one_group's work group at most (a kernel whose passes over a small array need no second launch)
 
 
 def kernel_dir() -> Path:
@@ -135,14 +135,20 @@ class Kernels:
         """Launch over n elements, rounded up to the 1-D group size (kernels bounds-check)."""
         return self.launch(name, (round_up(max(n, 1), self.local_1d),), (self.local_1d,), *args)
 
-    def one_group(self, name: str, n: int, *args, cap: int = ONE_GROUP):
-        """Launch one work group for a kernel that loops over n elements itself (barriers between its passes, group
-        reductions in local memory): the largest power of two within ``cap``, the device's and the kernel's limits and
-        the first one ≥ n; its local scratch (one accumulator an item) comes after ``args``."""
-        device = self.device
-        largest = min(cap, self._kernel_limit(name), device.max_work_group_size, device.max_work_item_sizes[0])
+    def upload(self, host: np.ndarray):
+        """A device copy of ``host`` in its own dtype (a term a kernel reads in another precision than the backend's,
+        e.g. float64 where the backend works in float32)."""
+        return cla.to_device(self.queue, np.ascontiguousarray(host))
+
+    def row_groups(self, name: str, rows: int, n: int, *args, local: tuple = (), cap: int | None = None):
+        """Launch ``rows`` work groups for a kernel whose group g loops over row g's n elements itself (barriers
+        between its passes, group reductions in local memory): each the largest power of two within ``cap``, the
+        device's and the kernel's limits and the first one ≥ n; after ``args``, a local buffer of each byte count in
+        ``local``, then the reductions' scratch (one accumulator an item)."""
+        largest = min(self.group_limit(name), cap or self.max_group)
         size = min(1 << (largest.bit_length() - 1), _power_of_two_at_least(n))
-        return self.launch(name, (size,), (size,), *args, cl.LocalMemory(size * self.acc.itemsize))
+        buffers = [cl.LocalMemory(int(nbytes)) for nbytes in local] + [cl.LocalMemory(size * self.acc.itemsize)]
+        return self.launch(name, (int(rows) * size,), (size,), *args, *buffers)
 
     def reduce(self, name: str, n: int, *args, outputs: int = 1) -> np.ndarray:
         """Run a partial-sum kernel (reduce.cl) and return its per-group partials on the host (ACC dtype):

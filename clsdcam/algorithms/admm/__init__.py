@@ -33,9 +33,9 @@ each with its scaled dual: x = H·v (data), u_d = D_d·v (TV), w = v (non-negati
       a_ω = μ₁|Ĥ_ω|² + μ₂,y|d̂_y|² + μ₂,x|d̂_x|² + μ₃ > 0,
 
   strictly diagonally dominant, solved by Thomas's sweeps on pivots computed once per penalties
-  (:func:`~.terms.band_pivots`): each coefficient read and written twice, where a DCT along λ (which diagonalises
-  D_λᵀD_λ) would mix all K bands twice. Then v = irfft2(v̂) and Hv = irfft2(Ĥ·v̂): 2K forward and 2K inverse
-  transforms, as one FISTA gradient.
+  (:func:`~.terms.band_pivots`; the kernels form theirs on the device): each coefficient read and written twice,
+  where a DCT along λ (which diagonalises D_λᵀD_λ) would mix all K bands twice. Then v = irfft2(v̂) and
+  Hv = irfft2(Ĥ·v̂): 2K forward and 2K inverse transforms, as one FISTA gradient.
 * **x-step**, per pixel (Sherman–Morrison): with q = Hv + ξ, argmin ½(b_p − f_pᵀx_p)² + μ₁/2‖x_p − q_p‖² is
   x_p = q_p + f_p·(b_p − f_pᵀq_p)/(μ₁ + ‖f_p‖²) on the sensor window, x_p = q_p outside it.
 * **u-step**: u_d = soft(D_d v + η_d, τw_d/μ₂), the exact prox of the anisotropic TV (not the Haar average FISTA

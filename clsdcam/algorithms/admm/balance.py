@@ -14,8 +14,11 @@ few points (the probe's count, :mod:`clsdcam.solve.auto_weights`) C is ``THRESHO
 cube is set by how few voxels are lit, far below the points' own edges, and C = 2 there left ADMM hundreds to
 thousands of iterations slower (docs/convergence.md, "Wider TV thresholds for a few points"); and β_d may fall to
 ``FLOOR_FEW_POINTS`` there, where the floor 1/``BALANCE_RANGE`` held the sixteen-source scenes' penalties up to 4
-times above what C asks ("Lighter penalties for a few points"). The RMS is read on the host (one download of w,
-once per solve), so both backends set the same penalties.
+times above what C asks ("Lighter penalties for a few points"). The RMS is the splitting's ``difference_rms``: on
+the host, each band's squares summed in w's precision and the bands' in float64 (:func:`.host_steps.difference_rms`);
+on the kernels, one reduction over w on the device with its sums in the accumulators (``admm_difference_squares``),
+which reads back three sums where w itself (147 MB at full size) was read before. The two agree to the rounding of
+the host's float32 dot products (tests/test_parity.py), so both backends set the same penalties to that rounding.
 
 Any change of penalties between two iterations (the balance's, a point-like scene's, :func:`repenalise`) keeps
 every unscaled dual, so the iteration goes on from the same point with new pivots (ADMM's fixed point, the splits
@@ -30,12 +33,10 @@ and the unscaled duals, does not depend on the penalties):
 """
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
 
-from .host_steps import difference
 from .terms import Penalties, SplitState, SplittingBase
 
 THRESHOLD_OVER_RMS = 2.0      # C: chosen on the tuning panel (docs/convergence.md)
@@ -47,29 +48,6 @@ BALANCE_RANGE = 64.0          # β_d within [1/64, 64]
 # penalty, and held at 1/64 they reach their answer hundreds of iterations later (docs/convergence.md, "Lighter
 # penalties for a few points")
 FLOOR_FEW_POINTS = 1.0 / 4096
-
-
-def difference_rms(split: SplittingBase, w: np.ndarray) -> dict[int, float]:
-    """rms(D_d w) for each active TV axis: each band's differences in w's precision, their squares summed by one dot
-    product a band and the bands' sums in float64. (The whole cube's squares formed in float64 at once took 0.5–2 s
-    at full size on the host, where the balance took 0.7–1.0 s of a GPU solve, docs/convergence.md, "The balance's
-    time on a GPU"; this agrees with them to about 1e-6.)"""
-    out = np.empty_like(w[:1])
-    return {axis: math.sqrt(sum(band_squares(w, axis, band, out) for band in range(len(w))) / w.size)
-            for axis in split.axes}
-
-
-def band_squares(w: np.ndarray, axis: int, band: int, out: np.ndarray) -> float:
-    """Σ(D_d w)² over one band of w (along λ: its difference to the next band, 0 for the last), ``out`` one band's
-    scratch."""
-    if axis == 0:
-        if band == len(w) - 1:
-            return 0.0
-        np.subtract(w[band + 1], w[band], out=out[0])
-    else:
-        difference(w[band:band + 1], axis, out)
-    flat = out.ravel()
-    return float(np.dot(flat, flat))
 
 
 def balanced_penalties(split: SplittingBase, rms: dict[int, float], threshold_over_rms: float,
@@ -87,11 +65,12 @@ def balanced_penalties(split: SplittingBase, rms: dict[int, float], threshold_ov
 
 
 def balance(split: SplittingBase, state: SplitState, backend, few_points: bool = False) -> Penalties:
-    """Set the balanced penalties from the iterate w (read on the host from ``backend``), C and the floor the
-    ``few_points`` ones on a scene of a few points, the duals carried over (:func:`repenalise`). Returns them."""
+    """Set the balanced penalties from the RMS of the iterate's differences (the splitting's own
+    ``difference_rms``, on the device on the kernels), C and the floor the ``few_points`` ones on a scene of a few
+    points, the duals carried over (:func:`repenalise`) with ``backend``'s operations. Returns them."""
     threshold, floor = ((THRESHOLD_FEW_POINTS, FLOOR_FEW_POINTS) if few_points
                         else (THRESHOLD_OVER_RMS, 1.0 / BALANCE_RANGE))
-    rms = difference_rms(split, backend.to_host(state.w))
+    rms = split.difference_rms(state)
     return repenalise(split, state, backend, balanced_penalties(split, rms, threshold, floor))
 
 

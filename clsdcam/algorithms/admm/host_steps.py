@@ -1,7 +1,7 @@
 """ADMM's steps on NumPy arrays: :class:`Splitting`, the iteration :mod:`clsdcam.algorithms.admm` derives, with both
 passes and the c-step's solve along λ on cache-sized row blocks on the host's threads (``backends/blocks``): the
-iteration reads each cube about twice besides its transforms. The first differences D_d and their adjoints, and
-the tridiagonal sweeps along λ, are here too.
+iteration reads each cube about twice besides its transforms. The first differences D_d and their adjoints, the
+balance's RMS of the differences, and the tridiagonal sweeps along λ, are here too.
 
 The data split on the sensor window. Outside the window the x-step is the relaxation alone (ξ = 0 there): x − ξ
 becomes y = αHv + (1 − α)(x − ξ). So the host keeps x − ξ over the field as its spectrum Ŷ and steps it there, and x
@@ -12,6 +12,8 @@ its transform to Ŷ. Both of those transforms are pruned to the window (``backen
 transform the whole field, and the x-step skips the field outside the window. The iterates are the kernels' but for
 rounding (tests/test_parity.py)."""
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import scipy.fft
@@ -50,6 +52,29 @@ def difference(v: np.ndarray, axis: int, out: np.ndarray, below=None) -> np.ndar
         after = v[_along(axis, 0)] if below is None else below
         np.subtract(after, v[last], out=out[last])
     return out
+
+
+def difference_rms(split: SplittingBase, w: np.ndarray) -> dict[int, float]:
+    """rms(D_d w) for each of ``split``'s active TV axes (the balance's on the host, :mod:`.balance`): each band's
+    differences in w's precision, their squares summed by one dot product a band and the bands' sums in float64. (The
+    whole cube's squares formed in float64 at once took 0.5–2 s at full size on the host, docs/convergence.md, "The
+    balance's time on a GPU"; this agrees with them to about 1e-6.)"""
+    out = np.empty_like(w[:1])
+    return {axis: math.sqrt(sum(band_squares(w, axis, band, out) for band in range(len(w))) / w.size)
+            for axis in split.axes}
+
+
+def band_squares(w: np.ndarray, axis: int, band: int, out: np.ndarray) -> float:
+    """Σ(D_d w)² over one band of w (along λ: its difference to the next band, 0 for the last), ``out`` one band's
+    scratch."""
+    if axis == 0:
+        if band == len(w) - 1:
+            return 0.0
+        np.subtract(w[band + 1], w[band], out=out[0])
+    else:
+        difference(w[band:band + 1], axis, out)
+    flat = out.ravel()
+    return float(np.dot(flat, flat))
 
 
 def difference_adjoint_add(u: np.ndarray, axis: int, scale: float, out: np.ndarray, above=None,
@@ -272,6 +297,10 @@ class Splitting(SplittingBase):
             r = self.dtype.type(ratios[axis])
             state.s[i] += (self.dtype.type(1) - r) * state.eta[i]
             state.eta[i] *= r
+
+    def difference_rms(self, state: SplitState) -> dict[int, float]:
+        """rms(D_d w) of the iterate for each active TV axis (:func:`difference_rms`; :mod:`.balance`)."""
+        return difference_rms(self, state.w)
 
     def _band_solve(self, data: np.ndarray, change: np.ndarray, rest: np.ndarray) -> None:
         """data += change; rest ← v̂, the system along λ at each Fourier coefficient for the right-hand side

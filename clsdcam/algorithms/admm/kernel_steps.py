@@ -9,20 +9,23 @@
   one kernel that forms the right-hand side in Fourier, solves the tridiagonal system along λ at each Fourier
   coefficient by Thomas's sweeps and writes Ĥ·v̂ beside v̂ (admm_band_solve: v̂'s spectrum read and written twice,
   the other once); with the margin's correction (:mod:`.margin`), one kernel before it that takes the band of the
-  data split's spectrum, and one after it that corrects v̂'s and Ĥv̂'s bands (:mod:`.margin_kernels`).
+  data split's spectrum, and three after it that correct v̂'s and Ĥv̂'s bands (:mod:`.margin_kernels`).
 
-Two scalar reads an iteration (the two reductions), and ξ read and its band written where the margin's band starts
-again; the calibration's and the penalties' terms are uploaded once per solver (``CalibrationTerms.on_device``), the
-margin's band terms (a few kilobytes) with each new set of penalties.
+Two scalar reads an iteration (the two reductions); the calibration's and the penalties' terms are uploaded once per
+solver (``CalibrationTerms.on_device``), the margin's band terms (a few kilobytes) with each new set of penalties, and
+the c-step's pivots formed on the device from the diagonal along λ (admm_band_pivots). The balance's RMS of the
+iterate's differences is one more reduction (admm_difference_squares), w staying on the device.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from ...backends.base import ints, total
 from .margin import margin_correction
 from .margin_kernels import KernelMarginCorrection
-from .terms import CalibrationTerms, SplitState, SplittingBase
+from .terms import CalibrationTerms, PenaltyTerms, SplitState, SplittingBase
 
 
 class KernelSplitting(SplittingBase):
@@ -33,7 +36,7 @@ class KernelSplitting(SplittingBase):
                  margin_steps: int = 0):
         super().__init__(model, terms, tv, l1, relaxation, margin_steps)
         self.backend = model.backend
-        self.workers = self.backend.workers         # the margin's host transform where its band starts again
+        self.workers = self.backend.workers         # MarginCorrection's (the host's arithmetic the kernels follow)
         self.kernels = self.backend.kernels
         self.b = b
         self.filters = terms.on_device(self.backend, "filters", terms.filters)
@@ -41,13 +44,30 @@ class KernelSplitting(SplittingBase):
         self.mask = np.int32(sum(1 << axis for axis in self.axes))
 
     def set_penalties(self, penalties):
-        """The penalties, the margin's correction of them (from the host terms), and their terms on the device."""
+        """The penalties, the margin's correction of them (from the host terms), and their terms on the device (the
+        pivots formed there: :meth:`_band_pivots`)."""
         super().set_penalties(penalties)
         be, terms, margin = self.backend, self.terms, margin_correction(self)
         self.margin = margin and KernelMarginCorrection(margin, be, self.n_bands)
         self._gain = terms.on_device(be, "gain", self._gain)
         self._data_transfer = terms.on_device(be, "data transfer", self._data_transfer, complex_=True)
-        self._pivots = terms.on_device(be, "pivots", self._pivots)
+
+    def _band_pivots(self, terms: PenaltyTerms):
+        """The c-step's pivots of ``terms``, formed on the device from its diagonal a and coupling e (one kernel,
+        admm_band_pivots: the recursion of :func:`~.terms.band_pivots` at each Fourier coefficient, in float64 where
+        the device's accumulators are, else in the working precision), once for each set of penalties; the host's
+        float64 recursion over the whole spectrum, and the upload of its result, are not made."""
+        return self.terms.made_on_device(self.backend, "pivots", terms.diagonal, lambda: self._pivots_of(terms))
+
+    def _pivots_of(self, terms: PenaltyTerms):
+        """admm_band_pivots' pivots (K, Hp, Wp//2 + 1) of ``terms``, a uploaded in the recursion's precision."""
+        be = self.backend
+        precision = np.promote_types(self.kernels.acc, self.dtype)         # the kernel's PIVOT
+        diagonal = self.kernels.upload(terms.diagonal.astype(precision))
+        pivots = be.empty((self.n_bands,) + diagonal.shape)
+        self.kernels.grid1("admm_band_pivots", diagonal.size, pivots, diagonal, precision.type(terms.coupling),
+                           np.int32(self.n_bands), np.int64(diagonal.size))
+        return pivots
 
     # ---- the state -----------------------------------------------------------------------------------------
     def start(self, v0) -> tuple[SplitState, float]:
@@ -109,6 +129,15 @@ class KernelSplitting(SplittingBase):
             n = int(np.prod(self.shape))
             self.kernels.grid1("admm_rescale_tv_duals", n, state.eta, state.s, np.int64(n), self.mask,
                                *self._per_axis(ratios.get))
+
+    def difference_rms(self, state: SplitState) -> dict[int, float]:
+        """rms(D_d w) of the iterate for each active TV axis (:mod:`.balance`): Σ(D_d w)² summed on the device in
+        one pass over w's rows (admm_difference_squares, the differences as the u-step takes them), three sums read
+        back."""
+        k, hp, _ = self.shape
+        sums = self.kernels.reduce("admm_difference_squares", k * hp, state.w, *ints(*self.shape), self.mask,
+                                   outputs=3)
+        return self.backend.drained({axis: math.sqrt(total(sums[axis]) / state.w.size) for axis in self.axes})
 
     def _per_axis(self, value) -> list:
         """``value(axis)`` for each active axis, 0 for the others, in the backend's precision (a kernel's three

@@ -196,24 +196,36 @@ class MarginCorrection:
         """P⁻¹·r̂ in the modes."""
         return r * self.inverse
 
-    def _dot(self, a: np.ndarray, b: np.ndarray) -> float:
-        """⟨a, b⟩ of the real fields whose half spectra's bands a and b are (up to the transform's constant)."""
-        return float(np.vdot((a * self.weights).astype(np.complex128), b.astype(np.complex128)).real)
+    def _dots(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """⟨a, b⟩ for each mode along λ (axis 0), of the real fields whose half spectra's bands a and b are (up to the
+        transform's constant), in float64: shape (K,)."""
+        weighted = (a * self.weights).astype(np.complex128)
+        return np.einsum("krc,krc->k", weighted.conj(), b.astype(np.complex128)).real
 
     def _solve(self, r: np.ndarray) -> np.ndarray:
-        """δ̂ after ``steps`` of P⁻¹-preconditioned conjugate gradients on A·δ̂ = r̂ from 0, in the modes."""
+        """δ̂ after ``steps`` of P⁻¹-preconditioned conjugate gradients on A·δ̂ = r̂ from 0, in the modes, each mode its
+        own: A is block diagonal there (P is diagonal, and Ĥ, μ₁Ĥ* and T act on each mode's plane alone), so every
+        mode's gradients run on its own (rows × columns) system, with its own step lengths. Over the same steps each
+        mode's error in A's norm is then at most what one set of lengths for the whole band leaves (each mode's
+        Krylov space holds that iteration's), and on the kernels each mode is one work group, its plane in local
+        memory. A mode whose rz is not positive (its residual zero) stops where it is."""
         delta, z = np.zeros_like(r), self._precondition(r)
-        p, rz = z, self._dot(r, z)
+        p, rz = z, self._dots(r, z)
         for step in range(self.steps):
-            if not rz > 0:
+            live = rz > 0
+            if not live.any():
                 break
             ap = self._apply(p)
-            length = rz / self._dot(p, ap)
-            delta += length * p
+            length = np.divide(rz, self._dots(p, ap), out=np.zeros_like(rz), where=live)
+            delta += self._per_mode(length) * p
             if step + 1 == self.steps:
                 break
-            r = r - length * ap
+            r = r - self._per_mode(length) * ap
             z = self._precondition(r)
-            rz, last = self._dot(r, z), rz
-            p = z + (rz / last) * p
+            rz, last = self._dots(r, z), rz
+            p = z + self._per_mode(np.divide(rz, last, out=np.zeros_like(rz), where=live)) * p
         return delta
+
+    def _per_mode(self, values: np.ndarray) -> np.ndarray:
+        """One float64 number a mode as the band's precision, shaped to scale each mode's plane."""
+        return values.astype(self.diagonal.dtype)[:, None, None]

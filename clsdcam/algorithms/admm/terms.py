@@ -4,6 +4,7 @@ problem's scales the penalties are set from."""
 from __future__ import annotations
 
 from dataclasses import astuple, dataclass, fields, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -121,11 +122,40 @@ def difference_spectrum(n: int, half: bool = False) -> np.ndarray:
     return 2.0 - 2.0 * np.cos(2.0 * np.pi * k / n)
 
 
+def x_step_gain(filters: np.ndarray, filter_energy: np.ndarray, data_penalty: float) -> np.ndarray:
+    """The x-step's gains g_p = f_p·r_p, r_p = 1/(μ₁ + ‖f_p‖²): the reciprocal formed in float64 over the (H, W)
+    sensor and rounded to the filters' precision once, the product in it (one rounding an element); what every
+    backend's x-step reads."""
+    reciprocal = (1.0 / (data_penalty + filter_energy)).astype(filters.dtype)
+    return filters * reciprocal
+
+
+@dataclass(eq=False)
+class PenaltyTerms:
+    """The terms of one set of penalties (:meth:`CalibrationTerms.for_penalties`): the x-step's ``gain``
+    (:func:`x_step_gain`), ``data_transfer`` μ₁conj(Ĥ), and the c-step's system along λ, its ``diagonal``
+    a = μ₁|Ĥ|² + μ₂,y|d̂_y|² + μ₂,x|d̂_x|² + μ₃ (:func:`band_diagonal`, float64) and ``coupling`` e = μ₂,λ; the host's
+    pivots of them (:attr:`pivots`) are formed on first use, so that the kernels, which form theirs on the device
+    from a and e, never pay for them."""
+
+    gain: np.ndarray
+    data_transfer: np.ndarray
+    diagonal: np.ndarray
+    coupling: float
+    n_bands: int
+    dtype: np.dtype
+
+    @cached_property
+    def pivots(self) -> np.ndarray:
+        """:func:`band_pivots` of a and e (a float64 recursion over the whole spectrum), in the working precision."""
+        return band_pivots(self.diagonal, self.coupling, self.n_bands).astype(self.dtype)
+
+
 class CalibrationTerms:
     """What the steps need of one model's calibration alone, the filters f_p with their energies ‖f_p‖² and the
-    transfer function Ĥ with |Ĥ|², and of the penalties, the x-step's gains f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ) and the
-    c-step's pivots: built once and kept by the solver, so a video's frames do not rebuild them (the pivots are a
-    float64 recursion over the whole spectrum); the terms of the last penalties are kept."""
+    transfer function Ĥ with |Ĥ|², and of the penalties, their :class:`PenaltyTerms`: built once and kept by the
+    solver, so a video's frames do not rebuild them; the terms of the last penalties are kept, and on a device the
+    arrays made of them (:meth:`on_device`)."""
 
     def __init__(self, model, filters: np.ndarray):
         self.dtype = np.dtype(model.backend.dtype)
@@ -135,12 +165,11 @@ class CalibrationTerms:
         self.filter_energy = np.einsum("khw,khw->hw", self.filters, self.filters, dtype=np.float64)
         self.transfer = transfer_function(model.psf, model.geometry).astype(self.cdtype)
         self.transfer_power = np.abs(self.transfer.astype(np.complex128)) ** 2
-        self._last = None           # ((penalties, TV axes), (gains, μ₁conj(Ĥ), pivots))
-        self._uploads: dict = {}    # term name -> (backend, host array, its device copy)
+        self._last = None           # ((penalties, TV axes), their PenaltyTerms)
+        self._uploads: dict = {}    # term name -> (backend, the host array it is made from, the device array)
 
-    def for_penalties(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(f_p/(μ₁ + ‖f_p‖²), μ₁conj(Ĥ), the pivots :func:`band_pivots` of a = μ₁|Ĥ|² + μ₂,y|d̂_y|² + μ₂,x|d̂_x|² + μ₃
-        and e = μ₂,λ), TV's terms on ``axes`` only."""
+    def for_penalties(self, p: Penalties, axes) -> PenaltyTerms:
+        """The :class:`PenaltyTerms` of ``p``, TV's terms on ``axes`` only (those of the last penalties kept)."""
         key = (astuple(p), tuple(axes))
         if self._last is None or self._last[0] != key:
             self._last = (key, self._penalty_terms(p, axes))
@@ -149,18 +178,22 @@ class CalibrationTerms:
     def on_device(self, backend, name: str, host: np.ndarray, complex_: bool = False):
         """``host``, the term called ``name``, on ``backend``'s device: uploaded once, and again only when the backend
         or the host array (new penalties, new terms) is another."""
+        return self.made_on_device(backend, name, host, lambda: backend.to_device(host, complex_))
+
+    def made_on_device(self, backend, name: str, source: np.ndarray, make):
+        """The device array ``make()`` makes of the host array ``source``, the term called ``name``: made once, and
+        again only when the backend or ``source`` is another."""
         kept = self._uploads.get(name)
-        if kept is None or kept[0] is not backend or kept[1] is not host:
-            kept = (backend, host, backend.to_device(host, complex_))
+        if kept is None or kept[0] is not backend or kept[1] is not source:
+            kept = (backend, source, make())
             self._uploads[name] = kept
         return kept[2]
 
-    def _penalty_terms(self, p: Penalties, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        gain = (self.filters / (p.data + self.filter_energy)).astype(self.dtype)
-        data_transfer = (p.data * np.conj(self.transfer)).astype(self.cdtype)
-        diagonal = band_diagonal(p, axes, self.transfer_power, self.field_shape)
-        pivots = band_pivots(diagonal, band_coupling(p, axes), self.n_bands)
-        return gain, data_transfer, pivots.astype(self.dtype)
+    def _penalty_terms(self, p: Penalties, axes) -> PenaltyTerms:
+        return PenaltyTerms(gain=x_step_gain(self.filters, self.filter_energy, p.data),
+                            data_transfer=(p.data * np.conj(self.transfer)).astype(self.cdtype),
+                            diagonal=band_diagonal(p, axes, self.transfer_power, self.field_shape),
+                            coupling=band_coupling(p, axes), n_bands=self.n_bands, dtype=self.dtype)
 
 
 class SplittingBase:
@@ -205,9 +238,16 @@ class SplittingBase:
         return 4 * self.n_bands
 
     def set_penalties(self, penalties: Penalties):
-        """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`)."""
+        """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`): the x-step's gains,
+        μ₁conj(Ĥ), and the c-step's pivots (:meth:`_band_pivots`)."""
         self.penalties = penalties
-        self._gain, self._data_transfer, self._pivots = self.terms.for_penalties(penalties, self.axes)
+        terms = self.terms.for_penalties(penalties, self.axes)
+        self._gain, self._data_transfer = terms.gain, terms.data_transfer
+        self._pivots = self._band_pivots(terms)
+
+    def _band_pivots(self, terms: PenaltyTerms):
+        """The c-step's pivots of ``terms``: the host's (:attr:`PenaltyTerms.pivots`)."""
+        return terms.pivots
 
     @property
     def coupling(self) -> float:
