@@ -181,8 +181,8 @@ __kernel void admm_band_solve(__global REAL2 *X, __global REAL2 *R, __global con
     }
 }
 
-/* The type of admm_band_pivots' recursion: ACC where it is double (no -DKAHAN: the device has fp64), else REAL (the
- * wider of the two). */
+/* The type of admm_band_pivots' recursion: ACC where it is double (no -DKAHAN: the device has fp64), else REAL; the
+ * kernel is launched only where it is double (a device without fp64 takes the host's pivots, kernel_steps.py). */
 #ifdef KAHAN
 #define PIVOT REAL
 #else

@@ -19,7 +19,7 @@ parts, per iteration:
 - objective checks: F at the checkpoints (in a subspace its g(B·c)), the best iterate kept;
 - basis checks: the subspace's full step and the choice of directions every 25 iterations;
 - ADMM's splits: the x-, u- and w-steps and duals outside the transforms;
-- ADMM's margin correction: its band's split and correction (the host's arithmetic, or the kernels' two launches);
+- ADMM's margin correction: its band's split and correction (the host's arithmetic, or the kernels' four launches);
 - other: the rest of the solve (its records, the result, the driver's observers).
 
 and the one-off parts, as a share of the whole solve: moves between spaces (building a subspace's filters,

@@ -55,17 +55,23 @@ class KernelSplitting(SplittingBase):
     def _band_pivots(self, terms: PenaltyTerms):
         """The c-step's pivots of ``terms``, formed on the device from its diagonal a and coupling e (one kernel,
         admm_band_pivots: the recursion of :func:`~.terms.band_pivots` at each Fourier coefficient, in float64 where
-        the device's accumulators are, else in the working precision), once for each set of penalties; the host's
-        float64 recursion over the whole spectrum, and the upload of its result, are not made."""
-        return self.terms.made_on_device(self.backend, "pivots", terms.diagonal, lambda: self._pivots_of(terms))
+        the device has fp64), once for each set of penalties: the host's float64 recursion over the whole spectrum,
+        and the upload of its result, are not made. A device without fp64 takes the host's pivots instead (a float32
+        recursion loses the system's conditioning near singularity)."""
+        if self._pivot_precision() != np.float64:
+            return self.terms.on_device(self.backend, "pivots", super()._band_pivots(terms))
+        return self.terms.made_on_device(self.backend, "pivots", terms, lambda: self._pivots_of(terms))
+
+    def _pivot_precision(self) -> np.dtype:
+        """admm_band_pivots' PIVOT: the accumulator where it is double, else the working precision."""
+        return np.promote_types(self.kernels.acc, self.dtype)
 
     def _pivots_of(self, terms: PenaltyTerms):
-        """admm_band_pivots' pivots (K, Hp, Wp//2 + 1) of ``terms``, a uploaded in the recursion's precision."""
+        """admm_band_pivots' pivots (K, Hp, Wp//2 + 1) of ``terms``, a uploaded in float64."""
         be = self.backend
-        precision = np.promote_types(self.kernels.acc, self.dtype)         # the kernel's PIVOT
-        diagonal = self.kernels.upload(terms.diagonal.astype(precision))
+        diagonal = self.kernels.upload(terms.diagonal.astype(np.float64))
         pivots = be.empty((self.n_bands,) + diagonal.shape)
-        self.kernels.grid1("admm_band_pivots", diagonal.size, pivots, diagonal, precision.type(terms.coupling),
+        self.kernels.grid1("admm_band_pivots", diagonal.size, pivots, diagonal, np.float64(terms.coupling),
                            np.int32(self.n_bands), np.int64(diagonal.size))
         return pivots
 

@@ -217,7 +217,7 @@ class MarginCorrection:
                 break
             ap = self._apply(p)
             length = np.divide(rz, self._dots(p, ap), out=np.zeros_like(rz), where=live)
-            delta += self._per_mode(length) * p
+            delta += np.where(live[:, None, None], self._per_mode(length) * p, 0)      # a stopped mode stays put
             if step + 1 == self.steps:
                 break
             r = r - self._per_mode(length) * ap

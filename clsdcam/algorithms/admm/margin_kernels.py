@@ -56,7 +56,7 @@ class KernelMarginCorrection:
         restart = state.margin_band is None
         if restart:
             be = self.backend
-            tracked = be.fft2(be.pad(state.xi, self.correction.field_shape, (0, 0)))
+            tracked = be.fft2(be.pad(state.xi, self.correction.field_shape, (0, 0), out=state.v))  # v: free till ifft2
         else:
             tracked = state.margin_band
         self.kernels.grid1("admm_margin_split", self.size, data, tracked, self.split_band, self.dual_band,

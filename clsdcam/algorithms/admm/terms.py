@@ -204,7 +204,8 @@ class SplittingBase:
     chosen mid-solve takes effect at once); ``relaxation`` α, each split's over-relaxation (the module docstring of
     :mod:`clsdcam.algorithms.admm`; 1: none); ``margin_steps`` the conjugate-gradient steps of the margin's
     correction (:mod:`.margin`; 0: none). A backend's steps (:class:`Splitting` on NumPy,
-    :class:`~clsdcam.algorithms.admm.kernel_steps.KernelSplitting` with programs) add ``start``, ``c_step`` and ``splits``."""
+    :class:`~clsdcam.algorithms.admm.kernel_steps.KernelSplitting` with programs) add ``start``, ``c_step``, ``splits``
+    and ``difference_rms`` (the balance's)."""
 
     def __init__(self, model, terms: CalibrationTerms, tv=None, l1=None, relaxation: float = 1.0,
                  margin_steps: int = 0):
