@@ -207,28 +207,11 @@ __kernel void admm_band_pivots(__global REAL *m, __global const PIVOT *a, PIVOT 
     }
 }
 
-/* Σ_{i<n} (b[i] − a[i])², each difference in REAL and its square in ACC, four independent partial sums (as tv.cl's
- * sum_abs_diff: what lets the compiler use vector lanes). */
-inline ACC sum_square_diff(__global const REAL *a, __global const REAL *b, int n)
-{
-    ACC s[4] = {0, 0, 0, 0};
-    int i = 0;
-    for (; i + 4 <= n; i += 4)
-        for (int j = 0; j < 4; ++j) {
-            REAL d = b[i + j] - a[i + j];
-            s[j] += (ACC)d * (ACC)d;
-        }
-    for (; i < n; ++i) {
-        REAL d = b[i] - a[i];
-        s[0] += (ACC)d * (ACC)d;
-    }
-    return (s[0] + s[1]) + (s[2] + s[3]);
-}
-
 /* admm_difference_squares, a reduction over the n = K·Hp rows of w (K, Hp, Wp): partial sums of (D_d w)² for each
  * axis d (output d; 0 for an axis not in mask, bit d), the differences in REAL as the u-step takes them (0 at the
- * last band, circular along y and x: forward_difference's), their squares in ACC, a row's summed along it and the
- * rows' compensated (-DKAHAN). One division per row; the inner loops run along the rows. */
+ * last band, circular along y and x: forward_difference's), their squares in ACC (tv.cl's sum_of_differences), a
+ * row's summed along it and the rows' compensated (-DKAHAN). One division per row; the inner loops run along the
+ * rows. */
 __kernel void admm_difference_squares(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
                                       __global const REAL *w, int K, int Hp, int Wp, int mask)
 {
@@ -237,11 +220,11 @@ __kernel void admm_difference_squares(__global ACC *partial, __local ACC *scratc
     FOR_TERMS(row) {
         size_t k = row / Hp, y = row - k * Hp;
         __global const REAL *r = w + row * Wp;
-        if ((mask & 1) && k + 1 < (size_t)K) acc_add(&s0, &c0, sum_square_diff(r, r + plane, Wp));
-        if (mask & 2) acc_add(&s1, &c1, sum_square_diff(r, y + 1 < (size_t)Hp ? r + Wp : r - y * Wp, Wp));
+        if ((mask & 1) && k + 1 < (size_t)K) acc_add(&s0, &c0, sum_of_differences(r, r + plane, Wp, 1));
+        if (mask & 2) acc_add(&s1, &c1, sum_of_differences(r, y + 1 < (size_t)Hp ? r + Wp : r - y * Wp, Wp, 1));
         if (mask & 4) {
             REAL last = r[0] - r[Wp - 1];
-            acc_add(&s2, &c2, sum_square_diff(r, r + 1, Wp - 1) + (ACC)last * (ACC)last);
+            acc_add(&s2, &c2, sum_of_differences(r, r + 1, Wp - 1, 1) + (ACC)last * (ACC)last);
         }
     }
     store_partial_of(partial, 0, group_reduce(s0 - c0, scratch, 0));

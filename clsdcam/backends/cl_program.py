@@ -102,16 +102,12 @@ class Kernels:
         return self._kernels[name]
 
     def group_limit(self, name: str) -> int:
-        """The most work items a group of kernel ``name`` may hold: ``max_group`` and the kernel's own limit."""
-        return min(self.max_group, self._kernel_limit(name))
-
-    def _kernel_limit(self, name: str) -> int:
-        """Kernel ``name``'s own work-group limit on this device (registers or local memory can make it lower than
-        the device's), asked once."""
+        """The most work items a group of kernel ``name`` may hold: ``max_group`` and the kernel's own limit on this
+        device (registers or local memory can make it lower), the latter asked once."""
         if name not in self._group_limits:
             self._group_limits[name] = self.kernel(name).get_work_group_info(
                 cl.kernel_work_group_info.WORK_GROUP_SIZE, self.device)
-        return self._group_limits[name]
+        return min(self.max_group, self._group_limits[name])
 
     def launch(self, name: str, global_size, local_size, *args):
         return self.kernel(name)(self.queue, global_size, local_size, *_args(args))
