@@ -1,17 +1,18 @@
 /* ADMM's passes over the field (clsdcam/algorithms/admm/ derives them; its kernel_steps.py launches them).
- * Cubes are (K, Hp, Wp) C-contiguous; the sensor window (H, W) sits at the field's origin; ξ, the filters f and the
- * x-step's gains g = f·(1/(μ₁ + ‖f‖²)) (terms.x_step_gain) are (K, H, W); b is (H, W). The split arrays η and s
+ * Cubes are (K, Hp, Wp) C-contiguous; the sensor window (H, W) sits at the field's origin; ξ and the filters f are
+ * (K, H, W); b and the x-step's r = 1/(μ₁ + ‖f‖²) (terms.x_step_reciprocal) are (H, W). The split arrays η and s
  * hold one cube per active TV axis, in axis order (λ, y, x). Differences along λ stop at the last band; along y and x
  * they are circular. */
 
 /* admm_x_step, a reduction (reduce.cl) over the n = Hp·Wp field pixels: with q_k = α·hv_k + (1 − α)·x_k (+ ξ_k on
  * the window) at pixel p, on the sensor window
  *   ξ_k ← −g_k·(b − Σ_j f_j·q_j),   x_k ← q_k − ξ_k,   hv_k ← x_k − ξ_k   (= x − ξ⁺, the next c-step's data term)
+ * with the gain g_k = f_k·r rounded to REAL (as the host's terms.PenaltyTerms.gain)
  * and outside it x_k ← q_k, hv_k ← q_k (no data there, no dual); partial sums of ½(Σ_k f_k·hv_k − b)², the data
  * term at v (before the step). Sums over k in ACC. */
 __kernel void admm_x_step(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
                           __global REAL *hv, __global REAL *x, __global REAL *xi, __global const REAL *f,
-                          __global const REAL *gain, __global const REAL *b, int K, int H, int W, int Wp, REAL alpha)
+                          __global const REAL *r, __global const REAL *b, int K, int H, int W, int Wp, REAL alpha)
 {
     ACC s = 0, c = 0;
     size_t window = (size_t)H * W;
@@ -33,10 +34,11 @@ __kernel void admm_x_step(__global ACC *partial, __local ACC *scratch, long n, l
             fitted += (ACC)fk * (ACC)h;
             stepped += (ACC)fk * (ACC)(alpha * h + ((REAL)1 - alpha) * x[i] + xi[k * window + p]);
         }
-        REAL misfit = b[p] - (REAL)stepped;
+        REAL misfit = b[p] - (REAL)stepped, rp = r[p];
         for (int k = 0; k < K; ++k) {
             size_t i = k * n + at;
-            REAL q = alpha * hv[i] + ((REAL)1 - alpha) * x[i] + xi[k * window + p], e = -gain[k * window + p] * misfit;
+            REAL gain = f[k * window + p] * rp;
+            REAL q = alpha * hv[i] + ((REAL)1 - alpha) * x[i] + xi[k * window + p], e = -gain * misfit;
             xi[k * window + p] = e;
             q -= e;
             x[i] = q;
@@ -207,9 +209,29 @@ __kernel void admm_band_pivots(__global REAL *m, __global const PIVOT *a, PIVOT 
     }
 }
 
+/* sum_of_squared_differences: Σ_{i<n} (b[i] − a[i])², the difference in REAL, its square in ACC, in four independent
+ * partial sums (a reduction the compiler may not reorder by itself, so this is what lets it use vector lanes). */
+inline ACC sum_of_squared_differences(__global const REAL *a, __global const REAL *b, int n)
+{
+    ACC s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        REAL d0 = b[i] - a[i], d1 = b[i + 1] - a[i + 1], d2 = b[i + 2] - a[i + 2], d3 = b[i + 3] - a[i + 3];
+        s0 += (ACC)d0 * (ACC)d0;
+        s1 += (ACC)d1 * (ACC)d1;
+        s2 += (ACC)d2 * (ACC)d2;
+        s3 += (ACC)d3 * (ACC)d3;
+    }
+    for (; i < n; ++i) {
+        REAL d = b[i] - a[i];
+        s0 += (ACC)d * (ACC)d;
+    }
+    return (s0 + s1) + (s2 + s3);
+}
+
 /* admm_difference_squares, a reduction over the n = K·Hp rows of w (K, Hp, Wp): partial sums of (D_d w)² for each
  * axis d (output d; 0 for an axis not in mask, bit d), the differences in REAL as the u-step takes them (0 at the
- * last band, circular along y and x: forward_difference's), their squares in ACC (tv.cl's sum_of_differences), a
+ * last band, circular along y and x: forward_difference's), their squares in ACC (sum_of_squared_differences), a
  * row's summed along it and the rows' compensated (-DKAHAN). One division per row; the inner loops run along the
  * rows. */
 __kernel void admm_difference_squares(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
@@ -220,11 +242,11 @@ __kernel void admm_difference_squares(__global ACC *partial, __local ACC *scratc
     FOR_TERMS(row) {
         size_t k = row / Hp, y = row - k * Hp;
         __global const REAL *r = w + row * Wp;
-        if ((mask & 1) && k + 1 < (size_t)K) acc_add(&s0, &c0, sum_of_differences(r, r + plane, Wp, 1));
-        if (mask & 2) acc_add(&s1, &c1, sum_of_differences(r, y + 1 < (size_t)Hp ? r + Wp : r - y * Wp, Wp, 1));
+        if ((mask & 1) && k + 1 < (size_t)K) acc_add(&s0, &c0, sum_of_squared_differences(r, r + plane, Wp));
+        if (mask & 2) acc_add(&s1, &c1, sum_of_squared_differences(r, y + 1 < (size_t)Hp ? r + Wp : r - y * Wp, Wp));
         if (mask & 4) {
             REAL last = r[0] - r[Wp - 1];
-            acc_add(&s2, &c2, sum_of_differences(r, r + 1, Wp - 1, 1) + (ACC)last * (ACC)last);
+            acc_add(&s2, &c2, sum_of_squared_differences(r, r + 1, Wp - 1) + (ACC)last * (ACC)last);
         }
     }
     store_partial_of(partial, 0, group_reduce(s0 - c0, scratch, 0));

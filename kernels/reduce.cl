@@ -72,13 +72,23 @@ __kernel void amax(__global ACC *partial, __local ACC *scratch, long n, long spa
     store_partial(partial, group_reduce(m, scratch, 1));
 }
 
-/* tv_norm: partial sums of tv_row (tv.cl) over the n = K·H rows of x (K,H,W). */
+/* tv_norm: partial sums of Σ_d w_d |x_{i+e_d} − x_i| over the n = K·H·W elements i of x (K,H,W), each with the
+ * forward neighbours it has along (λ, y, x) (w_d = 0 skips d): summed, Σ_d w_d ‖∇_d x‖₁. A work item per element,
+ * so a GPU's neighbouring items read neighbouring elements (coalesced). */
 __kernel void tv_norm(__global ACC *partial, __local ACC *scratch, long n, long span, long step, __global const REAL *x,
                       int K, int H, int W, ACC w0, ACC w1, ACC w2)
 {
     ACC s = 0, c = 0;
-    FOR_TERMS(row)
-        acc_add(&s, &c, tv_row(x, row, K, H, W, w0, w1, w2));
+    size_t plane = (size_t)H * W;
+    FOR_TERMS(i) {
+        size_t k = i / plane, rest = i - k * plane, y = rest / W, col = rest - y * W;
+        REAL v = x[i];
+        ACC t = 0;
+        if (w2 > 0 && col + 1 < W) t += w2 * (ACC)fabs(x[i + 1] - v);
+        if (w1 > 0 && y + 1 < H)   t += w1 * (ACC)fabs(x[i + W] - v);
+        if (w0 > 0 && k + 1 < K)   t += w0 * (ACC)fabs(x[i + plane] - v);
+        acc_add(&s, &c, t);
+    }
     store_partial(partial, group_reduce(s - c, scratch, 0));
 }
 

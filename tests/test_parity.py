@@ -191,6 +191,25 @@ def test_forward_model_and_adjoint(field, engine):
     assert model.lipschitz() == pytest.approx(ref.lipschitz(), rel=1e-5)
 
 
+@pytest.mark.parametrize("field", [None, (25, 33)])
+def test_a_window_embedded_on_the_device_is_numpys_field(field, engine):
+    """embed uploads the (K, H, W) window and pads it on the device: the field is NumPy's exactly (zero outside the
+    window), a window of one band is spread over every band as NumPy's assignment does, and the zero start is made
+    on the device."""
+    from clsdcam.camera.model import ForwardModel
+
+    rng = np.random.default_rng(9)
+    psf, filters = rng.random(SENSOR), rng.random((K, *SENSOR))
+    ref = ForwardModel(NumpyBackend("float32"), psf, filters, field_shape=field)
+    model = ForwardModel(opencl("float32", engine), psf, filters, field_shape=field)
+    cube = rng.random((K, *SENSOR))
+    for window in (cube, cube[:1]):
+        want = ref.embed(window)
+        assert want.shape == ref.cube_shape and np.count_nonzero(want) == cube.size
+        assert np.array_equal(model.backend.to_host(model.embed(window)), want)
+    assert np.array_equal(model.backend.to_host(model.zero_field()), np.zeros(ref.cube_shape, np.float32))
+
+
 @pytest.fixture(scope="module")
 def simulation(cl_tiny):
     from clsdcam.sim import simulate
@@ -637,7 +656,8 @@ def test_admm_reconstruction_matches_numpy(simulation, engine, cl_tiny, garbage_
 
 def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(simulation, engine, cl_tiny):
     """A second frame (half as bright) resumes from the first's splits and duals, rescaled on the device: its cube
-    matches NumPy's second frame to 1e-4 (relative L2), and the device's upload of the terms is made once."""
+    matches NumPy's second frame to 1e-4 (relative L2), and the device's upload of the terms is made once (the x-step's
+    gains formed inline, never on the host)."""
     from clsdcam import Settings, Solver
     from clsdcam.algorithms.admm.terms import TERMS_KEY
 
@@ -651,8 +671,9 @@ def test_admm_reconstruction_resumes_a_video_frame_on_the_device_as_numpy_does(s
         cubes.append(solver.solve(0.5 * simulation.measurement, state=state, iters=iters).cube)
         uploaded.append({name: kept[2] for name, kept in solver.shared[TERMS_KEY]._uploads.items()})
     assert uploaded[0] == uploaded[1] == {}                                      # NumPy uploads nothing
-    assert set(uploaded[2]) == {"filters", "transfer", "gain", "data transfer", "pivots"}
+    assert set(uploaded[2]) == {"filters", "transfer", "reciprocal", "data transfer", "pivots"}
     assert all(uploaded[3][name] is array for name, array in uploaded[2].items())    # the same device arrays
+    assert "gain" not in vars(solver.shared[TERMS_KEY]._last[1])                  # the host's gains never formed
     assert np.linalg.norm(cubes[1] - cubes[0]) / np.linalg.norm(cubes[0]) <= 1e-4
 
 

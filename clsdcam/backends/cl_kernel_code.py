@@ -39,11 +39,11 @@ class KernelCode:
         return device_path(self.backend, transfer, filters, field_shape, skip_unseen)
 
     def tv_norm(self, x, weights) -> float:
-        """Row-wise partial sums in ACC."""
+        """Partial sums in ACC, an element's forward differences a term (reduce.cl's tv_norm)."""
         be = self.backend
         acc = be.kernels.acc.type
         w = [acc(wd if wd > 0 else 0.0) for wd in weights]
-        return be.drained(total(be.kernels.reduce("tv_norm", x.shape[0] * x.shape[1], x, *ints(*x.shape), *w)))
+        return be.drained(total(be.kernels.reduce("tv_norm", x.size, x, *ints(*x.shape), *w)))
 
     def gram(self, x) -> np.ndarray:
         """Work item (t, i, j) sums x_i·x_j over pixels t, t + T, … (j ≥ i) in ACC, its group adds them; the host adds

@@ -12,6 +12,8 @@ path, one operator). Knows nothing of the device.
 """
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
 from ..errors import InputError
@@ -41,8 +43,14 @@ class ForwardModel:
         self.n_bands = filters.shape[0]
         self.cube_shape = (self.n_bands,) + self.field_shape
         self.psf = psf
-        self.convolution = convolution or backend.convolution(transfer_function(psf, self.geometry), filters,
-                                                              self.field_shape, skip_unseen=skip_unseen)
+        self.convolution = convolution or backend.convolution(self.transfer, filters, self.field_shape,
+                                                              skip_unseen=skip_unseen)
+
+    @cached_property
+    def transfer(self) -> np.ndarray:
+        """Ĥ, the PSF's transfer function on the field (float64, on the host: :func:`transfer_function`), formed once
+        for the model and what else needs it (ADMM's terms)."""
+        return transfer_function(self.psf, self.geometry)
 
     def with_filters(self, filters: np.ndarray) -> "ForwardModel":
         """The same PSF and field with other filters (the spectral subspace's G_j = Σ_k B_kj F_k)."""
@@ -64,11 +72,14 @@ class ForwardModel:
         return self.convolution.transforms()
 
     def embed(self, cube: np.ndarray):
-        """A host (K, H, W) cube on the sensor window -> a device field cube, zero outside."""
-        field = np.zeros(self.cube_shape, self.backend.dtype)
-        oy, ox = self.offset
-        field[:, oy:oy + self.sensor_shape[0], ox:ox + self.sensor_shape[1]] = cube
-        return self.backend.to_device(field)
+        """A host (K, H, W) cube on the sensor window -> a device field cube, zero outside: the window uploaded and
+        padded on the device (a quarter of the field's bytes cross to it)."""
+        window = np.ascontiguousarray(np.broadcast_to(cube, (self.n_bands,) + self.sensor_shape), self.backend.dtype)
+        return self.backend.pad(self.backend.to_device(window), self.field_shape, self.offset)
+
+    def zero_field(self):
+        """A device field cube of zeros (made there: nothing crosses)."""
+        return self.backend.zeros(self.cube_shape)
 
     def window(self, v) -> np.ndarray:
         """The sensor-sized window of a device field cube, on the host: (K, H, W)."""

@@ -54,7 +54,7 @@ class Reconstruction:
             stop_at_fit: float | None = None) -> Result:
         """The result (see :meth:`clsdcam.solve.solver.Solver.solve` for the arguments)."""
         if self.b is None:
-            return self._result(self.model.embed(np.zeros(self._window_shape())), [], "zero measurement")
+            return self._result(self.model.zero_field(), [], "zero measurement")
         be, s, solver = self.backend, self.settings, self.solver
         start = self._state.start(be, self.units.solver_factor) if self._state else self.start()
         priors = build_priors(be, s, start.reference(DataReferences(self.model, self.b, solver.lipschitz).value))
@@ -124,7 +124,7 @@ class Reconstruction:
 
     def _first_iterate(self):
         if self._x0 is None:
-            return self.model.embed(np.zeros(self._window_shape()))
+            return self.model.zero_field()
         x0 = self.units.to_solver(self._x0)
         if x0.shape == self.model.cube_shape:
             return self.backend.to_device(x0)

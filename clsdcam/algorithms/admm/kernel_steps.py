@@ -44,12 +44,13 @@ class KernelSplitting(SplittingBase):
         self.mask = np.int32(sum(1 << axis for axis in self.axes))
 
     def set_penalties(self, penalties):
-        """The penalties, the margin's correction of them (from the host terms), and their terms on the device (the
-        pivots formed there: :meth:`_band_pivots`)."""
+        """The penalties, the margin's correction of them (from the host terms), and their terms on the device: the
+        x-step's reciprocal r (the gains f·r formed inline), μ₁conj(Ĥ), and the pivots formed there
+        (:meth:`_band_pivots`)."""
         super().set_penalties(penalties)
         be, terms, margin = self.backend, self.terms, margin_correction(self)
         self.margin = margin and KernelMarginCorrection(margin, be, self.n_bands)
-        self._gain = terms.on_device(be, "gain", self._gain)
+        self._reciprocal = terms.on_device(be, "reciprocal", self._penalty_terms.reciprocal)
         self._data_transfer = terms.on_device(be, "data transfer", self._data_transfer, complex_=True)
 
     def _band_pivots(self, terms: PenaltyTerms):
@@ -113,7 +114,8 @@ class KernelSplitting(SplittingBase):
         """The x-, w- and u-steps with their duals, relaxed by ``alpha``; the data term at v and (‖w⁺ − w‖², ‖w⁺‖²)."""
         k, (h, w), (bands, hp, wp) = self.kernels, self.sensor_shape, self.shape
         alpha = self._real(alpha)
-        data = total(k.reduce("admm_x_step", hp * wp, state.hv, state.x, state.xi, self.filters, self._gain, self.b,
+        data = total(k.reduce("admm_x_step", hp * wp, state.hv, state.x, state.xi, self.filters, self._reciprocal,
+                              self.b,
                               *ints(bands, h, w, wp), alpha))
         step, norm = (total(row) for row in k.reduce("admm_w_step", state.v.size, state.v, state.rho, state.w,
                                                      state.rest, self._real(self.nonneg_shift()),

@@ -8,7 +8,6 @@ from functools import cached_property
 
 import numpy as np
 
-from ...camera.geometry import transfer_function
 
 TERMS_KEY = "admm calibration terms"     # the solver's shared store keeps the CalibrationTerms under this name
 
@@ -122,28 +121,34 @@ def difference_spectrum(n: int, half: bool = False) -> np.ndarray:
     return 2.0 - 2.0 * np.cos(2.0 * np.pi * k / n)
 
 
-def x_step_gain(filters: np.ndarray, filter_energy: np.ndarray, data_penalty: float) -> np.ndarray:
-    """The x-step's gains g_p = f_p·r_p, r_p = 1/(μ₁ + ‖f_p‖²): the reciprocal formed in float64 over the (H, W)
-    sensor and rounded to the filters' precision once, the product in it (one rounding an element); what every
-    backend's x-step reads."""
-    reciprocal = (1.0 / (data_penalty + filter_energy)).astype(filters.dtype)
-    return filters * reciprocal
+def x_step_reciprocal(filter_energy: np.ndarray, data_penalty: float, dtype) -> np.ndarray:
+    """r_p = 1/(μ₁ + ‖f_p‖²) over the (H, W) sensor, formed in float64 and rounded to ``dtype`` once: the x-step's
+    gains are g_p = f_p·r_p, the product in the filters' precision (one rounding an element), on the host
+    (:attr:`PenaltyTerms.gain`) and inline on the kernels alike."""
+    return (1.0 / (data_penalty + filter_energy)).astype(dtype)
 
 
 @dataclass(eq=False)
 class PenaltyTerms:
-    """The terms of one set of penalties (:meth:`CalibrationTerms.for_penalties`): the x-step's ``gain``
-    (:func:`x_step_gain`), ``data_transfer`` μ₁conj(Ĥ), and the c-step's system along λ, its ``diagonal``
-    a = μ₁|Ĥ|² + μ₂,y|d̂_y|² + μ₂,x|d̂_x|² + μ₃ (:func:`band_diagonal`, float64) and ``coupling`` e = μ₂,λ; the host's
-    pivots of them (:attr:`pivots`) are formed on first use, so that the kernels, which form theirs on the device
-    from a and e, never pay for them."""
+    """The terms of one set of penalties (:meth:`CalibrationTerms.for_penalties`): the x-step's ``reciprocal`` r
+    (:func:`x_step_reciprocal`) of the calibration's ``filters`` f, ``data_transfer`` μ₁conj(Ĥ), and the c-step's system
+    along λ, its ``diagonal`` a = μ₁|Ĥ|² + μ₂,y|d̂_y|² + μ₂,x|d̂_x|² + μ₃ (:func:`band_diagonal`, float64) and
+    ``coupling`` e = μ₂,λ. The host's gains f·r (:attr:`gain`) and pivots of a and e (:attr:`pivots`) are formed on
+    first use, so that the kernels, which form the gains inline and their pivots on the device, never pay for
+    them."""
 
-    gain: np.ndarray
+    reciprocal: np.ndarray
+    filters: np.ndarray
     data_transfer: np.ndarray
     diagonal: np.ndarray
     coupling: float
     n_bands: int
     dtype: np.dtype
+
+    @cached_property
+    def gain(self) -> np.ndarray:
+        """The x-step's gains g = f·r (K, H, W), in the filters' precision."""
+        return self.filters * self.reciprocal
 
     @cached_property
     def pivots(self) -> np.ndarray:
@@ -163,7 +168,7 @@ class CalibrationTerms:
         self.field_shape, self.n_bands = model.field_shape, model.n_bands
         self.filters = np.ascontiguousarray(filters, self.dtype)
         self.filter_energy = np.einsum("khw,khw->hw", self.filters, self.filters, dtype=np.float64)
-        self.transfer = transfer_function(model.psf, model.geometry).astype(self.cdtype)
+        self.transfer = model.transfer.astype(self.cdtype)
         self.transfer_power = np.abs(self.transfer.astype(np.complex128)) ** 2
         self._last = None           # ((penalties, TV axes), their PenaltyTerms)
         self._uploads: dict = {}    # term name -> (backend, the host array it is made from, the device array)
@@ -190,8 +195,8 @@ class CalibrationTerms:
         return kept[2]
 
     def _penalty_terms(self, p: Penalties, axes) -> PenaltyTerms:
-        return PenaltyTerms(gain=x_step_gain(self.filters, self.filter_energy, p.data),
-                            data_transfer=(p.data * np.conj(self.transfer)).astype(self.cdtype),
+        return PenaltyTerms(reciprocal=x_step_reciprocal(self.filter_energy, p.data, self.dtype),
+                            filters=self.filters, data_transfer=(p.data * np.conj(self.transfer)).astype(self.cdtype),
                             diagonal=band_diagonal(p, axes, self.transfer_power, self.field_shape),
                             coupling=band_coupling(p, axes), n_bands=self.n_bands, dtype=self.dtype)
 
@@ -220,6 +225,7 @@ class SplittingBase:
         self.tv, self.l1 = tv, l1
         self.axes = [axis for axis, weight in enumerate(tv.axis_weights) if weight > 0] if tv is not None else []
         self.penalties: Penalties | None = None
+        self._penalty_terms: PenaltyTerms | None = None      # the penalties' terms (set_penalties)
 
     # ---- the problem's scales ------------------------------------------------------------------------------
     @property
@@ -239,12 +245,17 @@ class SplittingBase:
         return 4 * self.n_bands
 
     def set_penalties(self, penalties: Penalties):
-        """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`): the x-step's gains,
-        μ₁conj(Ĥ), and the c-step's pivots (:meth:`_band_pivots`)."""
+        """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`): the x-step's gains (on
+        first use: :attr:`_gain`), μ₁conj(Ĥ), and the c-step's pivots (:meth:`_band_pivots`)."""
         self.penalties = penalties
-        terms = self.terms.for_penalties(penalties, self.axes)
-        self._gain, self._data_transfer = terms.gain, terms.data_transfer
+        terms = self._penalty_terms = self.terms.for_penalties(penalties, self.axes)
+        self._data_transfer = terms.data_transfer
         self._pivots = self._band_pivots(terms)
+
+    @property
+    def _gain(self) -> np.ndarray:
+        """The x-step's gains of the penalties (:attr:`PenaltyTerms.gain`, formed on the host's first use)."""
+        return self._penalty_terms.gain
 
     def _band_pivots(self, terms: PenaltyTerms):
         """The c-step's pivots of ``terms``: the host's (:attr:`PenaltyTerms.pivots`)."""
