@@ -210,6 +210,36 @@ def test_a_window_embedded_on_the_device_is_numpys_field(field, engine):
     assert np.array_equal(model.backend.to_host(model.zero_field()), np.zeros(ref.cube_shape, np.float32))
 
 
+def test_the_probes_window_reading_on_the_device_is_numpys(engine):
+    """The auto weights' reading of an iterate's window, p = mean/peak, from two reductions over the window cropped on
+    the device (nothing downloaded): the window's own to the reductions' rule (1e-5 relative; NumPy's float64 sum to
+    1e-12), from a field whose margin (4) is brighter than the window's peak (at most 1), which a reading must not
+    see; and 1 for a dark window."""
+    from types import SimpleNamespace
+
+    from clsdcam.camera.model import ForwardModel
+    from clsdcam.solve.auto_weights import window_reading
+
+    rng = np.random.default_rng(10)
+    psf, filters = rng.random(SENSOR), rng.random((K, *SENSOR))
+    bright = (rng.random((K, *SENSOR)) ** 4).astype(np.float32)
+    readings = []
+    for be in (NumpyBackend("float32"), opencl("float32", engine)):
+        model = ForwardModel(be, psf, filters)
+        (oy, ox), (h, w) = model.offset, SENSOR
+        problem = SimpleNamespace(backend=be, model=model, solution=lambda x: x)
+        got = []
+        for window in (bright, np.zeros_like(bright)):
+            field = np.full(model.cube_shape, 4.0, np.float32)          # a margin brighter than the window
+            field[:, oy:oy + h, ox:ox + w] = window
+            got.append(window_reading(problem, be.to_device(field)))
+        readings.append(got)
+    want = bright.mean(dtype=np.float64) / bright.max()
+    assert readings[0][0] == (pytest.approx(want, rel=1e-12), bright.size, K)
+    assert readings[1][0] == (pytest.approx(want, rel=1e-5), bright.size, K)
+    assert readings[0][1][0] == readings[1][1][0] == 1.0
+
+
 @pytest.fixture(scope="module")
 def simulation(cl_tiny):
     from clsdcam.sim import simulate
