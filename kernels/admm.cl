@@ -7,12 +7,13 @@
 /* admm_x_step, a reduction (reduce.cl) over the n = Hp·Wp field pixels: with q_k = α·hv_k + (1 − α)·x_k (+ ξ_k on
  * the window) at pixel p, on the sensor window
  *   ξ_k ← −g_k·(b − Σ_j f_j·q_j),   x_k ← q_k − ξ_k,   hv_k ← x_k − ξ_k   (= x − ξ⁺, the next c-step's data term)
- * with the gain g_k = f_k·r rounded to REAL (as the host's terms.PenaltyTerms.gain)
+ * with the gain g_k = f_k·r (r: `reciprocal`) rounded to REAL (as the host's terms.PenaltyTerms.gain)
  * and outside it x_k ← q_k, hv_k ← q_k (no data there, no dual); partial sums of ½(Σ_k f_k·hv_k − b)², the data
  * term at v (before the step). Sums over k in ACC. */
 __kernel void admm_x_step(__global ACC *partial, __local ACC *scratch, long n, long span, long step,
                           __global REAL *hv, __global REAL *x, __global REAL *xi, __global const REAL *f,
-                          __global const REAL *r, __global const REAL *b, int K, int H, int W, int Wp, REAL alpha)
+                          __global const REAL *reciprocal, __global const REAL *b, int K, int H, int W, int Wp,
+                          REAL alpha)
 {
     ACC s = 0, c = 0;
     size_t window = (size_t)H * W;
@@ -34,7 +35,7 @@ __kernel void admm_x_step(__global ACC *partial, __local ACC *scratch, long n, l
             fitted += (ACC)fk * (ACC)h;
             stepped += (ACC)fk * (ACC)(alpha * h + ((REAL)1 - alpha) * x[i] + xi[k * window + p]);
         }
-        REAL misfit = b[p] - (REAL)stepped, rp = r[p];
+        REAL misfit = b[p] - (REAL)stepped, rp = reciprocal[p];
         for (int k = 0; k < K; ++k) {
             size_t i = k * n + at;
             REAL gain = f[k * window + p] * rp;

@@ -192,25 +192,25 @@ def test_forward_model_and_adjoint(field, engine):
 
 
 @pytest.mark.parametrize("field", [None, (25, 33)])
-def test_a_window_embedded_on_the_device_is_numpys_field(field, engine):
-    """embed uploads the (K, H, W) window and pads it on the device: the field is NumPy's exactly (zero outside the
-    window), a window of one band is spread over every band as NumPy's assignment does, and the zero start is made
-    on the device."""
+def test_a_window_embedded_on_the_device_is_placed_at_the_offset(field, engine):
+    """embed uploads the window and pads it on the device: the field is the window placed at the model's offset and
+    zero elsewhere, built here by slicing, a (K, H, W) window as it is, one of one band or an (H, W) plane spread over
+    every band as NumPy's assignment spreads it; and the zero start is made on the device."""
     from clsdcam.camera.model import ForwardModel
 
     rng = np.random.default_rng(9)
     psf, filters = rng.random(SENSOR), rng.random((K, *SENSOR))
-    ref = ForwardModel(NumpyBackend("float32"), psf, filters, field_shape=field)
     model = ForwardModel(opencl("float32", engine), psf, filters, field_shape=field)
+    (oy, ox), (h, w) = model.offset, SENSOR
     cube = rng.random((K, *SENSOR))
-    for window in (cube, cube[:1]):
-        want = ref.embed(window)
-        assert want.shape == ref.cube_shape and np.count_nonzero(want) == cube.size
+    for window in (cube, cube[:1], cube[0]):
+        want = np.zeros(model.cube_shape, np.float32)
+        want[:, oy:oy + h, ox:ox + w] = window
         assert np.array_equal(model.backend.to_host(model.embed(window)), want)
-    assert np.array_equal(model.backend.to_host(model.zero_field()), np.zeros(ref.cube_shape, np.float32))
+    assert np.array_equal(model.backend.to_host(model.zero_field()), np.zeros(model.cube_shape, np.float32))
 
 
-def test_the_probes_window_reading_on_the_device_is_numpys(engine):
+def test_the_probes_window_reading_on_the_device_is_the_windows_own(engine):
     """The auto weights' reading of an iterate's window, p = mean/peak, from two reductions over the window cropped on
     the device (nothing downloaded): the window's own to the reductions' rule (1e-5 relative; NumPy's float64 sum to
     1e-12), from a field whose margin (4) is brighter than the window's peak (at most 1), which a reading must not

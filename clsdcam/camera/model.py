@@ -73,7 +73,7 @@ class ForwardModel:
 
     def embed(self, cube: np.ndarray):
         """A host (K, H, W) cube on the sensor window -> a device field cube, zero outside: the window uploaded and
-        padded on the device (a quarter of the field's bytes cross to it)."""
+        padded on the device (only the window's bytes cross to it)."""
         window = np.ascontiguousarray(np.broadcast_to(cube, (self.n_bands,) + self.sensor_shape), self.backend.dtype)
         return self.backend.pad(self.backend.to_device(window), self.field_shape, self.offset)
 

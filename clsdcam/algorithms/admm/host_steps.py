@@ -148,8 +148,10 @@ class Splitting(SplittingBase):
                                                 np.dtype(self.cdtype).itemsize))
 
     def set_penalties(self, penalties):
-        """The penalties, what depends on them, and the margin's correction of them (``margin_steps`` > 0)."""
+        """The penalties, what depends on them (the x-step's gains formed here, before the blocks' threads read them:
+        :attr:`~.terms.PenaltyTerms.gain`), and the margin's correction of them (``margin_steps`` > 0)."""
         super().set_penalties(penalties)
+        self._gain = self._penalty_terms.gain
         self.margin = margin_correction(self)
 
     # ---- the state -----------------------------------------------------------------------------------------

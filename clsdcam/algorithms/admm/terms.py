@@ -245,17 +245,14 @@ class SplittingBase:
         return 4 * self.n_bands
 
     def set_penalties(self, penalties: Penalties):
-        """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`): the x-step's gains (on
-        first use: :attr:`_gain`), μ₁conj(Ĥ), and the c-step's pivots (:meth:`_band_pivots`)."""
+        """The penalties, and what depends on them (:meth:`CalibrationTerms.for_penalties`, kept as ``_penalty_terms``,
+        whose gains a backend's steps take as they need them): μ₁conj(Ĥ), and the c-step's pivots
+        (:meth:`_band_pivots`)."""
         self.penalties = penalties
         terms = self._penalty_terms = self.terms.for_penalties(penalties, self.axes)
         self._data_transfer = terms.data_transfer
         self._pivots = self._band_pivots(terms)
 
-    @property
-    def _gain(self) -> np.ndarray:
-        """The x-step's gains of the penalties (:attr:`PenaltyTerms.gain`, formed on the host's first use)."""
-        return self._penalty_terms.gain
 
     def _band_pivots(self, terms: PenaltyTerms):
         """The c-step's pivots of ``terms``: the host's (:attr:`PenaltyTerms.pivots`)."""
