@@ -83,7 +83,11 @@ class ForwardModel:
 
     def window(self, v) -> np.ndarray:
         """The sensor-sized window of a device field cube, on the host: (K, H, W)."""
-        return self.backend.to_host(self.backend.crop(v, self.sensor_shape, self.offset))
+        return self.backend.to_host(self.window_on_device(v))
+
+    def window_on_device(self, v):
+        """The sensor-sized window of a device field cube, on the device: (K, H, W)."""
+        return self.backend.crop(v, self.sensor_shape, self.offset)
 
     def lipschitz(self, margin: float = 1.01, iters: int = POWER_ITERS, tol: float = POWER_TOL, start=None,
                   flat: float = 1.0, expected: float | None = None) -> float:

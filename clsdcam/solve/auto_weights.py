@@ -187,8 +187,7 @@ def window_reading(problem, x) -> tuple[float, int, int]:
     """(p, voxels, bands) of the iterate ``x``'s sensor window: its mean over its peak (1 where it is dark), its
     voxels and its bands. The window of a solution is non-negative, so its sum and peak are the backend's ℓ₁ norm and
     max|·| (on a device, two reductions: the window is not downloaded)."""
-    be, model = problem.backend, problem.model
-    window = be.crop(problem.solution(x), model.sensor_shape, model.offset)
+    be, window = problem.backend, problem.model.window_on_device(problem.solution(x))
     voxels, peak = math.prod(window.shape), be.amax(window)
     return (be.l1_norm(window) / voxels / peak if peak > 0 else 1.0), voxels, window.shape[0]
 

@@ -115,8 +115,7 @@ class KernelSplitting(SplittingBase):
         k, (h, w), (bands, hp, wp) = self.kernels, self.sensor_shape, self.shape
         alpha = self._real(alpha)
         data = total(k.reduce("admm_x_step", hp * wp, state.hv, state.x, state.xi, self.filters, self._reciprocal,
-                              self.b,
-                              *ints(bands, h, w, wp), alpha))
+                              self.b, *ints(bands, h, w, wp), alpha))
         step, norm = (total(row) for row in k.reduce("admm_w_step", state.v.size, state.v, state.rho, state.w,
                                                      state.rest, self._real(self.nonneg_shift()),
                                                      self._real(self.penalties.nonneg), alpha, outputs=2))

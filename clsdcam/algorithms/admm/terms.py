@@ -253,7 +253,6 @@ class SplittingBase:
         self._data_transfer = terms.data_transfer
         self._pivots = self._band_pivots(terms)
 
-
     def _band_pivots(self, terms: PenaltyTerms):
         """The c-step's pivots of ``terms``: the host's (:attr:`PenaltyTerms.pivots`)."""
         return terms.pivots
