@@ -362,21 +362,21 @@ def test_a_frame_whose_field_moved_starts_its_duals_afresh_in_the_last_frames_pe
     assert fresh.state.carry[0].penalties != carried
 
 
-@pytest.mark.parametrize("few_points", [False, True])
-def test_the_balance_sets_each_axis_threshold_from_the_iterates_differences_and_keeps_the_unscaled_duals(tiny,
-                                                                                                       few_points):
-    """After the balance, each axis's soft threshold τw_d/μ₂,d is C times the RMS of D_d w (its β_d within the
-    range; C the wider one on a scene of a few points), the splits u_d = s_d + η_d and the unscaled duals μ₂,d·η_d
-    are as before, and the state records the penalties its duals are in; the pivots and the coupling along λ are the
-    new penalties'."""
+@pytest.mark.parametrize("scene", ["spread", "point_like", "few_points"])
+def test_the_balance_sets_each_axis_threshold_from_the_iterates_differences_and_keeps_the_unscaled_duals(tiny, scene):
+    """After the balance, each axis's soft threshold τw_d/μ₂,d is C times the RMS of D_d w (its β_d within the range; C
+    the wider ones on a point-like scene and on a scene of a few points), the splits u_d = s_d + η_d and the unscaled
+    duals μ₂,d·η_d are as before, and the state records the penalties its duals are in; the pivots and the coupling
+    along λ are the new penalties'."""
     model, split = tiny
     state = random_state(split)
     state.w *= 0.02                    # differences whose threshold the range does not hold
     old = split.penalties
     u, unscaled = state.s + state.eta, [old.tv_along(a) * state.eta[i] for i, a in enumerate(split.axes)]
     rounding = 1e-12 * (np.abs(state.s).max() + np.abs(state.eta).max())    # s + η may cancel to near 0
-    new = balance.balance(split, state, model.backend, few_points)
-    c = balance.THRESHOLD_FEW_POINTS if few_points else balance.THRESHOLD_OVER_RMS
+    new = balance.balance(split, state, model.backend, scene)
+    c = {"spread": balance.THRESHOLD_OVER_RMS, "point_like": balance.THRESHOLD_POINT_LIKE,
+         "few_points": balance.THRESHOLD_FEW_POINTS}[scene]
     for i, axis in enumerate(split.axes):
         rms = np.sqrt(np.mean(difference(state.w, axis, np.empty_like(state.w)) ** 2))
         assert split.threshold(axis) == pytest.approx(c * rms, rel=1e-12)
@@ -483,11 +483,11 @@ def test_the_balance_holds_each_axis_within_its_range_and_leaves_a_flat_axis(tin
     state = random_state(split)
     state.w *= 1e6                     # differences far above the weight: every axis at its floor
     floors = []
-    for few in (False, True):
+    for scene in ("spread", "point_like", "few_points"):
         fresh = random_state(split)
         fresh.w[...] = state.w
-        floors.append(balance.balance(split, fresh, model.backend, few).tv_balance)
-    assert floors == [(1.0 / balance.BALANCE_RANGE,) * 3, (balance.FLOOR_FEW_POINTS,) * 3]
+        floors.append(balance.balance(split, fresh, model.backend, scene).tv_balance)
+    assert floors == [(1.0 / balance.BALANCE_RANGE,) * 3] * 2 + [(balance.FLOOR_FEW_POINTS,) * 3]
 
 
 def test_admm_balances_once_at_its_mark_and_a_resumed_frame_keeps_the_penalties(leds, monkeypatch):

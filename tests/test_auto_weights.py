@@ -216,7 +216,7 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monk
     told, real = [], balance.balance
     monkeypatch.setattr(balance, "balance", lambda *a: told.append(a[3]) or real(*a))
     reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT + 1, algorithm="admm")
-    assert admm.attrs["lit_per_pixel"] < FEW_POINTS_PER_PIXEL and told == [True]
+    assert admm.attrs["lit_per_pixel"] < FEW_POINTS_PER_PIXEL and told == ["few_points"]
     fista = reconstruct(sim.measurement, sim.calibration, iters=AUTO_AT, algorithm="fista")
     assert "mean_over_peak" not in fista.attrs
     assert fista.attrs["tv_chosen"] == pytest.approx(rule.for_noise(fista.attrs["noise_estimate"]))
@@ -433,16 +433,16 @@ def test_a_solve_counts_a_few_points_again_at_recount_at(monkeypatch):
     sim = simulate("points", (48, 64), 8, seed=0, cube=points)
     monkeypatch.setattr(settings, "AUTO_CAP", 400)
     told, real = [], balance.balance
-    monkeypatch.setattr(balance, "balance", lambda *a: told.append(a[3:] == (True,)) or real(*a))
+    monkeypatch.setattr(balance, "balance", lambda *a: told.append((*a[3:], "spread")[0]) or real(*a))
     few = reconstruct(sim.measurement, sim.calibration)
-    assert told == [True] and "lit spots" not in few.attrs["skips"]
+    assert told == ["few_points"] and "lit spots" not in few.attrs["skips"]
     assert few.attrs["lit_voxels_recounted"] == pytest.approx(3, abs=0.5) and SPOTS_FROM > 3     # gathered
     assert few.attrs["stop_tolerance"] == pytest.approx(CONVERGE * FEW_POINTS_STOP, rel=1e-12)
     monkeypatch.setattr(auto_weights, "SPOTS_FROM", 1)
     monkeypatch.setattr(settings, "AUTO_CAP", 800)
     spots = reconstruct(sim.measurement, sim.calibration)
     assert spots.attrs["lit_voxels_recounted"] == pytest.approx(few.attrs["lit_voxels_recounted"], rel=1e-6)
-    assert told == [True, True, False]     # the few points' balance at BALANCE_AT, the spread ones' at the recount
+    assert told == ["few_points", "few_points", "spread"]   # the few points' balance at BALANCE_AT, then the spread C
     penalties = spots.state.carry[0].penalties
     assert penalties.nonneg / penalties.tv == pytest.approx(NONNEG_POINT_LIKE / TV, rel=1e-12)
     assert f"at iteration {RECOUNT_AT} ≥ 1)" in spots.attrs["skips"] and "TV balanced again" in spots.attrs["skips"]

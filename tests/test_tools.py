@@ -333,10 +333,12 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
     from clsdcam.algorithms.admm import algorithm, balance
 
     constants = lambda: (algorithm.RELAXATION, algorithm.TV, algorithm.BALANCE_AT, balance.THRESHOLD_OVER_RMS,
-                         balance.THRESHOLD_FEW_POINTS)
+                         balance.THRESHOLD_FEW_POINTS, balance.THRESHOLD_POINT_LIKE, algorithm.NONNEG_POINT_LIKE)
     before = constants()
-    with bench_converged.admm_constants({"few_balance": 5.0, "balance": 3.0}):
+    changed = {"few_balance": 5.0, "balance": 3.0, "point_balance": 4.0, "nonneg_point": 1e-3}
+    with bench_converged.admm_constants(changed):
         assert (balance.THRESHOLD_FEW_POINTS, balance.THRESHOLD_OVER_RMS) == (5.0, 3.0)
+        assert (balance.THRESHOLD_POINT_LIKE, algorithm.NONNEG_POINT_LIKE) == (4.0, 1e-3)
     assert constants() == before
     bench_converged.main([*ONE_PIECEWISE_SCENE, "--variants",
                           "alpha=1,balance_at=1e9;alpha=1.7,tv=0.003,balance=3,balance_at=40",
@@ -360,14 +362,14 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
 
 
 def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_restores_the_method():
-    """A solve at a given weight reads no probe: told, ADMM's μ₃ falls to NONNEG_POINT_LIKE/NONNEG of its value
-    after AUTO_AT iterations, as the default's does on a point-like scene, and told a few points to
-    NONNEG_FEW_POINTS/NONNEG, its TV balance at that iteration taking the wider thresholds; told a few points in good
-    light and not of the fewest (``lighter``), μ₁ and μ₃ are then LIGHTER_FEW_POINTS of those and the balance sets
-    the same μ₂,d (its thresholds are the iterate's); told lit spots as well, after RECOUNT_AT iterations μ₁ is the
-    camera's again and μ₃ NONNEG_POINT_LIKE of μ₂'s scale (``Admm.lit_spots``); not told, or before that iteration,
-    or after the context, it keeps its penalties."""
-    from clsdcam.algorithms.admm import algorithm
+    """A solve at a given weight reads no probe: told, ADMM's μ₃ falls to NONNEG_POINT_LIKE/NONNEG of its value after
+    AUTO_AT iterations, as the default's does on a point-like scene, and told a few points to NONNEG_FEW_POINTS/NONNEG,
+    its TV balance at that iteration taking the point-like scenes' wider thresholds, or the few points' wider still;
+    told a few points in good light and not of the fewest (``lighter``), μ₁ and μ₃ are then LIGHTER_FEW_POINTS of those
+    and the balance sets the same μ₂,d (its thresholds are the iterate's); told lit spots as well, after RECOUNT_AT
+    iterations μ₁ is the camera's again and μ₃ NONNEG_POINT_LIKE of μ₂'s scale (``Admm.lit_spots``); not told, or before
+    that iteration, or after the context, it keeps its penalties."""
+    from clsdcam.algorithms.admm import algorithm, balance
     from clsdcam.sim import simulate
 
     sim = simulate(scene="points", shape=(24, 32), n_bands=4, seed=2)
@@ -384,8 +386,10 @@ def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_
     few = penalties(AUTO_AT + 2, **few_told)
     assert point_like.nonneg == pytest.approx(kept.nonneg * algorithm.NONNEG_POINT_LIKE / algorithm.NONNEG, rel=1e-12)
     assert few.nonneg == pytest.approx(kept.nonneg * algorithm.NONNEG_FEW_POINTS / algorithm.NONNEG, rel=1e-12)
-    assert few.nonneg < point_like.nonneg and point_like.tv_balance == kept.tv_balance
-    assert all(f < p for f, p in zip(few.tv_balance, point_like.tv_balance))     # C = 16 against 2: lower penalties
+    assert few.nonneg < point_like.nonneg
+    wider = balance.THRESHOLD_OVER_RMS / balance.THRESHOLD_POINT_LIKE             # C = 8 against 2: lower penalties
+    assert point_like.tv_balance == pytest.approx([wider * k for k in kept.tv_balance], rel=1e-9)
+    assert all(f < p for f, p in zip(few.tv_balance, point_like.tv_balance))     # C = 16 against 8: lower still
     bright = penalties(AUTO_AT + 2, point_like=True, few_points=True, lighter=True)
     assert bright.data == pytest.approx(few.data * algorithm.LIGHTER_FEW_POINTS, rel=1e-12)
     assert bright.nonneg == pytest.approx(few.nonneg * algorithm.LIGHTER_FEW_POINTS, rel=1e-12)

@@ -81,7 +81,7 @@ def dual_variants(variant: dict, events: dict):
     def later(admm, problem):
         if admm.state is not None and admm._iterations in (refresh, rebalance):
             if admm._iterations == rebalance and admm.splitting.axes:
-                balance(admm.splitting, admm.state, admm.backend, admm._few_points)
+                balance(admm.splitting, admm.state, admm.backend, admm._scene)
             if admm._iterations == refresh:
                 fixed_point_duals(admm.splitting, admm.state, admm.state.w.copy(), kind)
             events["restarts"] += 1

@@ -35,9 +35,9 @@ for a change that leaves the model's answer where it was (a faster pass), whose 
 the cached one's in the last digits.
 
 ``--variants 'alpha=1.7,tv=0.003;alpha=1'`` measures ADMM's constants instead (``clsdcam.algorithms.admm``'s DATA,
-TV, NONNEG, RELAXATION, MARGIN_STEPS and BALANCE_AT, and THRESHOLD_OVER_RMS and THRESHOLD_FEW_POINTS of its
-balance, by the names data, tv, nonneg, alpha, margin, balance_at, balance and few_balance; ``balance_at=1e9``: no
-balance): each variant runs
+TV, NONNEG, NONNEG_POINT_LIKE, RELAXATION, MARGIN_STEPS and BALANCE_AT, and THRESHOLD_OVER_RMS,
+THRESHOLD_POINT_LIKE and THRESHOLD_FEW_POINTS of its balance, by the names data, tv, nonneg, nonneg_point, alpha,
+margin, balance_at, balance, point_balance and few_balance; ``balance_at=1e9``: no balance): each variant runs
 ``--variant-iters`` at the scene's weight, told what the default's probe found (point-like, a few points; not an
 accelerated variant, below), scored every 10 iterations, and the table gives the mark from which it stays within the rules and
 where the stop would stop it at each ``--replay`` tolerance (``variants.md``, ``variants.json``). The names
@@ -217,9 +217,11 @@ def settled_within(points: list[dict], ref: dict) -> int | None:
 
 # a constant's name -> (its module in clsdcam.algorithms.admm, the constant)
 ADMM_CONSTANTS = {"data": ("algorithm", "DATA"), "tv": ("algorithm", "TV"), "nonneg": ("algorithm", "NONNEG"),
+                  "nonneg_point": ("algorithm", "NONNEG_POINT_LIKE"),
                   "alpha": ("algorithm", "RELAXATION"), "balance_at": ("algorithm", "BALANCE_AT"),
                   "margin": ("algorithm", "MARGIN_STEPS"),
-                  "balance": ("balance", "THRESHOLD_OVER_RMS"), "few_balance": ("balance", "THRESHOLD_FEW_POINTS")}
+                  "balance": ("balance", "THRESHOLD_OVER_RMS"), "point_balance": ("balance", "THRESHOLD_POINT_LIKE"),
+                  "few_balance": ("balance", "THRESHOLD_FEW_POINTS")}
 STARTS = {"fista_start": "fista", "answer_start": "admm"}   # a start's name -> the algorithm that makes its cube
 VARIANT_NAMES = (*ADMM_CONSTANTS, *ACCELERATIONS, *STARTS, *DUAL_VARIANTS)
 

@@ -5,14 +5,14 @@ step with its dual:
 
     v, Hv ← c-step(x − ξ, u − η, w − ρ);   x, ξ ← x-step(Hv + ξ);   u, η ← u-step(Dv + η);   w, ρ ← w-step(v + ρ)
 
-The iterate the driver sees is w, the non-negative copy of v. The penalties start relative to the problem's own
-scales (so a brighter scene, another PSF normalisation or filter gain needs no new values): μ₁ = ``DATA``·mean‖f_p‖²,
-μ₂ = ``TV``·μ₁·max|Ĥ|², μ₃ = ``NONNEG``·μ₁·max|Ĥ|² (:func:`penalties_for`; how they were chosen, and why residual
-balancing is not used: docs/admm.md). After ``BALANCE_AT`` iterations the TV split's is set along each axis from the
-iterate's differences, once (:mod:`.balance`); where the auto weights' probe finds the scene point-like (at the same
-iteration), the non-negativity split's drops to ``NONNEG_POINT_LIKE``, and on a scene of a few points to
-``NONNEG_FEW_POINTS`` while the balance widens its thresholds; on a scene of a few points in good light (the probe's
-noise σ̂ under ``GOOD_LIGHT_BELOW`` of max|b|) every penalty is then ``LIGHTER_FEW_POINTS`` of itself, unless
+The iterate the driver sees is w, the non-negative copy of v. The penalties start relative to the problem's own scales
+(so a brighter scene, another PSF normalisation or filter gain needs no new values): μ₁ = ``DATA``·mean‖f_p‖², μ₂ =
+``TV``·μ₁·max|Ĥ|², μ₃ = ``NONNEG``·μ₁·max|Ĥ|² (:func:`penalties_for`; how they were chosen, and why residual balancing
+is not used: docs/admm.md). After ``BALANCE_AT`` iterations the TV split's is set along each axis from the iterate's
+differences, once (:mod:`.balance`); where the auto weights' probe finds the scene point-like (at the same iteration),
+the non-negativity split's drops to ``NONNEG_POINT_LIKE`` while the balance widens its thresholds, and on a scene of a
+few points to ``NONNEG_FEW_POINTS`` while the balance widens them further; on a scene of a few points in good light (the
+probe's noise σ̂ under ``GOOD_LIGHT_BELOW`` of max|b|) every penalty is then ``LIGHTER_FEW_POINTS`` of itself, unless
 the scene is of the fewest points, under ``FEWEST_POINTS_PER_PIXEL`` lit voxels a window pixel (both the probe's:
 :func:`clsdcam.solve.auto_weights.lighter_few_points`; :meth:`Admm.point_like`). A scene of a few points that the
 probe's recount finds to be one of lit spots takes a point-like scene's penalties from there, its TV balanced again
@@ -140,7 +140,7 @@ class Admm(Algorithm):
         self.state = None
         self._resumed = None
         self._iterations = 0       # this solve's, for the TV penalties' balance at BALANCE_AT (balance.py)
-        self._few_points = False   # the probe's word that the scene is a few points: the balance's C and floor
+        self._scene = "spread"     # the probe's word on the scene, for the balance's C and floor (balance.py)
 
     def iterate(self, problem) -> dict:
         if self.splitting is None:
@@ -148,7 +148,7 @@ class Admm(Algorithm):
         if self._iterations == BALANCE_AT and self.splitting.axes and self.state.penalties.tv_balance is None:
             from .balance import balance
 
-            balance(self.splitting, self.state, self.backend, self._few_points)
+            balance(self.splitting, self.state, self.backend, self._scene)
         self._iterations += 1
         data, (step, norm) = self.splitting.iterate(self.state)
         return {"data": data, "change": ratio(step, norm)}
@@ -191,11 +191,11 @@ class Admm(Algorithm):
         """The scene is point-like (the auto weights' probe, :mod:`clsdcam.solve.auto_weights`): μ₃ from ``NONNEG`` to
         ``NONNEG_POINT_LIKE`` of the same scale, or ``NONNEG_FEW_POINTS`` on a scene of ``few_points``, and on one to
         make ``lighter`` (in good light, not of the fewest: ``lighter_few_points``) every penalty then
-        LIGHTER_FEW_POINTS of itself, the solve going on from the same point (:func:`.balance.repenalise`); on a scene
-        of a few points the TV balance still to come sets wider thresholds, and may set lower penalties
-        (:mod:`.balance`). Returns the line that says so (None before the first iteration, when only the balance is
-        told)."""
-        self._few_points = few_points
+        LIGHTER_FEW_POINTS of itself, the solve going on from the same point (:func:`.balance.repenalise`); the TV
+        balance still to come sets wider thresholds, wider still on a scene of a few points, where it may also set lower
+        penalties (:mod:`.balance`). Returns the line that says so (None before the first iteration, when only the
+        balance is told)."""
+        self._scene = "few_points" if few_points else "point_like"
         if self.state is None:
             return None
         from .balance import repenalise
@@ -204,7 +204,7 @@ class Admm(Algorithm):
         old = self.splitting.penalties
         new = replace(old, nonneg=old.nonneg * factor)
         said = (f"admm: μ₃ × {factor:g}, wider TV thresholds (a scene of a few points)" if few_points
-                else f"admm: μ₃ × {factor:g} (a point-like scene)")
+                else f"admm: μ₃ × {factor:g}, wider TV thresholds (a point-like scene)")
         if few_points and lighter:
             new = new.scaled(LIGHTER_FEW_POINTS)
             said += f"; every penalty × {LIGHTER_FEW_POINTS:g} (in good light, not of the fewest points)"
@@ -217,7 +217,7 @@ class Admm(Algorithm):
         balanced again from the iterate with the spread scenes' C and floor (:func:`.balance.balance`), the duals
         carried over (:func:`.balance.repenalise`). Returns the line that says so (None before the first
         iteration)."""
-        self._few_points = False
+        self._scene = "spread"
         if self.state is None:
             return None
         from .balance import balance, repenalise

@@ -9,12 +9,15 @@ differences along it:
 
     μ₂,d = τw_d / (C·rms(D_d w)),   C = THRESHOLD_OVER_RMS,
 
-held within a factor ``BALANCE_RANGE`` of the camera's μ₂ (a flat or black cube's RMS says nothing). On a scene of a
-few points (the probe's count, :mod:`clsdcam.solve.auto_weights`) C is ``THRESHOLD_FEW_POINTS``: the RMS over a black
-cube is set by how few voxels are lit, far below the points' own edges, and C = 2 there left ADMM hundreds to
-thousands of iterations slower (docs/convergence.md, "Wider TV thresholds for a few points"); and β_d may fall to
-``FLOOR_FEW_POINTS`` there, where the floor 1/``BALANCE_RANGE`` held the sixteen-source scenes' penalties up to 4
-times above what C asks ("Lighter penalties for a few points"). The RMS is the splitting's ``difference_rms``: on
+held within a factor ``BALANCE_RANGE`` of the camera's μ₂ (a flat or black cube's RMS says nothing). On a point-like
+scene that is not of a few points (the narrow-line LED spots the probe flags) C is ``THRESHOLD_POINT_LIKE``: its
+differences' RMS is the black field's more than the spots' edges, and C = 2 there left ADMM 1.1–2.3 times as many
+iterations to its stop (docs/convergence.md, "Wider TV thresholds for point-like scenes"). On a scene of a few points
+(the probe's count, :mod:`clsdcam.solve.auto_weights`) C is ``THRESHOLD_FEW_POINTS``: the RMS over a black cube is set
+by how few voxels are lit, far below the points' own edges, and C = 2 there left ADMM hundreds to thousands of
+iterations slower (docs/convergence.md, "Wider TV thresholds for a few points"); and β_d may fall to
+``FLOOR_FEW_POINTS`` there, where the floor 1/``BALANCE_RANGE`` held the sixteen-source scenes' penalties up to 4 times
+above what C asks ("Lighter penalties for a few points"). The RMS is the splitting's ``difference_rms``: on
 the host, each band's squares summed in w's precision and the bands' in float64 (:func:`.host_steps.difference_rms`);
 on the kernels, one reduction over w on the device with its sums in the accumulators (``admm_difference_squares``),
 which reads back three sums where w itself (147 MB at full size) was read before. The two agree to the rounding of
@@ -40,6 +43,8 @@ import numpy as np
 from .terms import Penalties, SplitState, SplittingBase
 
 THRESHOLD_OVER_RMS = 2.0      # C: chosen on the tuning panel (docs/convergence.md)
+# C on a point-like scene not of a few points (docs/convergence.md, "Wider TV thresholds for point-like scenes")
+THRESHOLD_POINT_LIKE = 8.0
 # C on a scene of a few points (the probe's count, clsdcam.solve.auto_weights.FEW_POINTS_PER_PIXEL): the differences'
 # RMS over a black cube is far below the points' own edges (docs/convergence.md, "Wider TV thresholds for a few points")
 THRESHOLD_FEW_POINTS = 16.0
@@ -64,12 +69,19 @@ def balanced_penalties(split: SplittingBase, rms: dict[int, float], threshold_ov
     return replace(p, tv_balance=tuple(betas))
 
 
-def balance(split: SplittingBase, state: SplitState, backend, few_points: bool = False) -> Penalties:
+def threshold_and_floor(scene: str) -> tuple[float, float]:
+    """C and the floor of β_d for a ``scene`` the probe read as "spread" (or not read), "point_like" or "few_points"
+    (the module docstring)."""
+    if scene == "few_points":
+        return THRESHOLD_FEW_POINTS, FLOOR_FEW_POINTS
+    return (THRESHOLD_POINT_LIKE if scene == "point_like" else THRESHOLD_OVER_RMS), 1.0 / BALANCE_RANGE
+
+
+def balance(split: SplittingBase, state: SplitState, backend, scene: str = "spread") -> Penalties:
     """Set the balanced penalties from the RMS of the iterate's differences (the splitting's own
-    ``difference_rms``, on the device on the kernels), C and the floor the ``few_points`` ones on a scene of a few
-    points, the duals carried over (:func:`repenalise`) with ``backend``'s operations. Returns them."""
-    threshold, floor = ((THRESHOLD_FEW_POINTS, FLOOR_FEW_POINTS) if few_points
-                        else (THRESHOLD_OVER_RMS, 1.0 / BALANCE_RANGE))
+    ``difference_rms``, on the device on the kernels), C and the floor the ``scene``'s (:func:`threshold_and_floor`),
+    the duals carried over (:func:`repenalise`) with ``backend``'s operations. Returns them."""
+    threshold, floor = threshold_and_floor(scene)
     rms = split.difference_rms(state)
     return repenalise(split, state, backend, balanced_penalties(split, rms, threshold, floor))
 
