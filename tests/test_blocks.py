@@ -97,8 +97,9 @@ def test_rectangular_bandmix_expands_and_projects():
 
 
 def test_a_ctrl_c_during_the_blocks_is_raised_once_every_thread_has_finished(default_sigint):
-    """A Ctrl-C reaches the main thread while two threads work: it is raised only after both have written their last
-    row, so whatever handles it (the driver putting the best iterate back) is not overwritten afterwards."""
+    """A Ctrl-C reaches the main thread while two threads work: it is raised only once no span is running, so
+    whatever handles it (the driver putting the best iterate back) is not overwritten afterwards. The span that saw
+    it has written its rows; the other, started or not yet when the Ctrl-C came, is whole or untouched."""
     import _thread
     import threading
     import time
@@ -117,4 +118,36 @@ def test_a_ctrl_c_during_the_blocks_is_raised_once_every_thread_has_finished(def
 
     with pytest.raises(KeyboardInterrupt):
         map_blocks(work, 4, row_bytes=1 << 30, workers=2)       # one row a block, two spans
-    assert np.all(out == 1.0)
+    seen = out.copy()
+    time.sleep(0.8)
+    assert np.array_equal(out, seen) and np.all(seen[:2] == 1.0) and seen[2] == seen[3]
+
+
+def test_a_ctrl_c_while_the_spans_are_submitted_lets_nothing_write_after_it(monkeypatch):
+    """A Ctrl-C while the second span is being submitted: the first, submitted, either runs to its end before the
+    Ctrl-C is raised or never starts; nothing writes after it is raised."""
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool, submitted = ThreadPoolExecutor(2), []
+
+    class InterruptedSubmission:
+        def submit(self, fn, *args):
+            if submitted:
+                raise KeyboardInterrupt        # as a Ctrl-C arriving now
+            submitted.append(pool.submit(fn, *args))
+            return submitted[-1]
+
+    monkeypatch.setattr(blocks, "_pool", lambda workers: InterruptedSubmission())
+    out = np.zeros(4)
+
+    def work(y0, y1, _scratch):
+        time.sleep(0.3)
+        out[y0:y1] = 1.0
+
+    with pytest.raises(KeyboardInterrupt):
+        map_blocks(work, 4, row_bytes=1 << 30, workers=2)
+    seen = out.copy()
+    time.sleep(0.8)
+    assert np.array_equal(out, seen) and not seen[2:].any()
+    pool.shutdown()

@@ -13,7 +13,8 @@ its share of the cores), else the cores this process may run on.
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor, wait
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 from functools import lru_cache
 from typing import Callable
@@ -77,13 +78,39 @@ def map_blocks(work: Callable[[int, int, dict], object], n_rows: int, row_bytes:
     parts = spans(n_rows, max(1, min(workers, -(-n_rows // block))))
     if len(parts) == 1:
         return walk(parts[0])
+    walks = _Walks()
     with single_threaded_blas():
-        futures = [_pool(len(parts)).submit(walk, part) for part in parts]
-        try:
+        try:                           # a Ctrl-C may come while the spans are still being submitted
+            futures = [_pool(len(parts)).submit(walks.run, walk, part) for part in parts]
             return [r for future in futures for r in future.result()]
-        except KeyboardInterrupt:      # the spans still running finish first: nothing writes after a Ctrl-C is seen
-            wait(futures)
+        except KeyboardInterrupt:      # no span starts after a Ctrl-C is seen, and those running finish first
+            walks.stop()
             raise
+
+
+class _Walks:
+    """The spans' walks on the pool: after :meth:`stop` none starts, and it returns once none is running."""
+
+    def __init__(self):
+        self._changed = threading.Condition()
+        self._running, self._stopped = 0, False
+
+    def run(self, walk, span) -> list:
+        with self._changed:
+            if self._stopped:
+                return []
+            self._running += 1
+        try:
+            return walk(span)
+        finally:
+            with self._changed:
+                self._running -= 1
+                self._changed.notify_all()
+
+    def stop(self) -> None:
+        with self._changed:
+            self._stopped = True
+            self._changed.wait_for(lambda: self._running == 0)
 
 
 @lru_cache(maxsize=1)
