@@ -433,7 +433,8 @@ def test_a_solve_counts_a_few_points_again_at_recount_at(monkeypatch):
     sim = simulate("points", (48, 64), 8, seed=0, cube=points)
     monkeypatch.setattr(settings, "AUTO_CAP", 400)
     told, real = [], balance.balance
-    monkeypatch.setattr(balance, "balance", lambda *a: told.append((*a[3:], "spread")[0]) or real(*a))
+    monkeypatch.setattr(balance, "balance", lambda split, state, backend, scene="spread":
+                        told.append(scene) or real(split, state, backend, scene))
     few = reconstruct(sim.measurement, sim.calibration)
     assert told == ["few_points"] and "lit spots" not in few.attrs["skips"]
     assert few.attrs["lit_voxels_recounted"] == pytest.approx(3, abs=0.5) and SPOTS_FROM > 3     # gathered

@@ -71,10 +71,10 @@ def balanced_penalties(split: SplittingBase, rms: dict[int, float], threshold_ov
 
 def threshold_and_floor(scene: str) -> tuple[float, float]:
     """C and the floor of β_d for a ``scene`` the probe read as "spread" (or not read), "point_like" or "few_points"
-    (the module docstring)."""
-    if scene == "few_points":
-        return THRESHOLD_FEW_POINTS, FLOOR_FEW_POINTS
-    return (THRESHOLD_POINT_LIKE if scene == "point_like" else THRESHOLD_OVER_RMS), 1.0 / BALANCE_RANGE
+    (the module docstring); any other name is a KeyError. Read when called, so the constants may be set meanwhile."""
+    return {"spread": (THRESHOLD_OVER_RMS, 1.0 / BALANCE_RANGE),
+            "point_like": (THRESHOLD_POINT_LIKE, 1.0 / BALANCE_RANGE),
+            "few_points": (THRESHOLD_FEW_POINTS, FLOOR_FEW_POINTS)}[scene]
 
 
 def balance(split: SplittingBase, state: SplitState, backend, scene: str = "spread") -> Penalties:
