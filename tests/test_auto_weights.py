@@ -8,8 +8,8 @@ from clsdcam.algorithms.admm import Admm, balance
 from clsdcam.algorithms.admm.algorithm import LIGHTER_FEW_POINTS, NONNEG, NONNEG_FEW_POINTS, NONNEG_POINT_LIKE, TV
 from clsdcam.solve import auto_weights
 from clsdcam.solve.auto_weights import (AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, FEWEST_POINTS_PER_PIXEL,
-                                        GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS_STOP, RECOUNT_AT, SPARSE_BELOW,
-                                        SPARSE_LIGHT_BELOW, SPOTS_FROM, AutoWeights, auto_tolerance, probe_reading,
+                                        GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS_STOP, POINTS_IN_GOOD_LIGHT_STOP,
+                                        RECOUNT_AT, SPARSE_BELOW, SPARSE_LIGHT_BELOW, SPOTS_FROM, AutoWeights, auto_tolerance, probe_reading,
                                         sparse_in_good_light)
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
@@ -267,10 +267,12 @@ MANY = (32, 128, 128)     # 0.04 lit voxels a pixel: 655.36 of these, point-like
 
 
 @pytest.mark.parametrize("cube, tolerance, said, few_points", [
-    (lit_voxels(656, MANY), CONVERGE, None, False),     # point-like, not a few points: CONVERGE
+    (lit_voxels(656, MANY), CONVERGE * POINTS_IN_GOOD_LIGHT_STOP, "a point-like scene in good light: noise 0.003 < "
+     "0.005", False),                                   # point-like, not a few points, in good light
     (lit_voxels(655, MANY), CONVERGE * LIGHTER_FEW_POINTS_STOP, "few lit voxels: 655, 0.03998 a pixel < 0.04; in good "
      "light, noise 0.003 < 0.005, and not of the fewest, ≥ 0.012 a pixel", True),
-    (lit_voxels(93, (32, 48, 48)), CONVERGE, None, False),    # under 500 lit voxels, over 0.04 a pixel: not a few
+    (lit_voxels(93, (32, 48, 48)), CONVERGE * POINTS_IN_GOOD_LIGHT_STOP, "a point-like scene in good light",
+     False),                                                  # under 500 lit voxels, over 0.04 a pixel: not a few
     (lit_voxels(120), CONVERGE * FEW_POINTS_STOP, "a point-like scene of few lit voxels: 120, 0.007324 a pixel < 0.04",
      True),
     (one_lit_pixel(), CONVERGE * FEW_POINTS_STOP, "few lit voxels: 1, 0.0009766 a pixel < 0.04", True),
@@ -279,7 +281,8 @@ MANY = (32, 128, 128)     # 0.04 lit voxels a pixel: 655.36 of these, point-like
 ])
 def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tolerance, said, few_points):
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
-    point-like threshold, CONVERGE below it, CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
+    point-like threshold, CONVERGE·POINTS_IN_GOOD_LIGHT_STOP below it (the probe's σ̂ = 0.003 is good light; low
+    light below), CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
     pixel (n/(H·W)); a note says so where it moved. The algorithm hears whether a point-like scene is one of a few
     points (None: not told), and whether it is one to lighten (in the probe's good light, σ̂ = 0.003, and not of the
     fewest, FEWEST_POINTS_PER_PIXEL lit voxels a pixel or more: CONVERGE·LIGHTER_FEW_POINTS_STOP); what it says back
@@ -298,6 +301,24 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tol
     stops = [line for line in stand_in.notes if line.startswith("stop: --converge auto, ")]
     assert [said in line for line in stops] == ([] if said is None else [True])
     assert said is None or stops[0].startswith(f"stop: --converge auto, {tolerance:.2g} (")
+
+
+@pytest.mark.parametrize("sigma, wider", [(0.8 * GOOD_LIGHT_BELOW, True), (1.25 * GOOD_LIGHT_BELOW, False)])
+def test_a_point_like_scene_in_good_light_stops_wider_and_in_low_light_keeps_the_stop(sigma, wider):
+    """A point-like scene that is not a few points takes CONVERGE·POINTS_IN_GOOD_LIGHT_STOP where the probe's σ̂ is
+    under GOOD_LIGHT_BELOW, said in a note, and keeps CONVERGE, unsaid, at or above it; a few points are narrowed
+    whatever the light."""
+    weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma, lit_voxels(656, MANY))
+    weights.act(stand_in, stand_in)
+    noise = weights.chosen["noise_estimate"]
+    assert (noise < GOOD_LIGHT_BELOW) is wider and stand_in.told_few_points is False
+    assert stand_in.rules.converge == pytest.approx(CONVERGE * (POINTS_IN_GOOD_LIGHT_STOP if wider else 1), rel=1e-12)
+    stops = [line for line in stand_in.notes if line.startswith("stop: --converge auto, ")]
+    assert stops == ([f"stop: --converge auto, {CONVERGE * POINTS_IN_GOOD_LIGHT_STOP:g} (a point-like scene in good "
+                      f"light: noise {noise:.2g} < {GOOD_LIGHT_BELOW:g})"] if wider else [])
+    for few, lighter in ((True, False), (True, True)):
+        share = LIGHTER_FEW_POINTS_STOP if lighter else FEW_POINTS_STOP
+        assert auto_tolerance(CONVERGE, CONVERGE_WIDE, True, few, lighter, good_light=True) == CONVERGE * share
 
 
 @pytest.mark.parametrize("every, sigma, narrow", [

@@ -318,18 +318,20 @@ def test_every_figure_of_the_readme_is_the_codes():
     bench_converged's reference), and it has no other (a measured figure lives in docs/ with its command)."""
     from clsdcam.camera.prototype import N_BANDS, SENSOR_SHAPE, SPECTRAL_RANGE
     from clsdcam.sim.filters import TILE
+    from clsdcam.solve.auto_weights import POINTS_IN_GOOD_LIGHT_STOP
     from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE
 
+    good_light = CONVERGE * POINTS_IN_GOOD_LIGHT_STOP
     with tools_importable():
         reference = tool("tools/bench_converged.py")["TODAY"]
     low, high = SPECTRAL_RANGE
     claims = [f"{TILE}×{TILE} spectral filter array, {N_BANDS} bands over {low:g}–{high:g} nm, "
               f"{SENSOR_SHAPE[0]}×{SENSOR_SHAPE[1]} sensor",
               f"within {100 * CONVERGE_WIDE:g} % of that minimiser, {100 * CONVERGE:g} % where the scene is point-like "
-              f"or sparse in good light",
-              f"`--converge auto`: {CONVERGE_WIDE:g}, or {CONVERGE:g} on point-like scenes, on sparse ones in good "
-              f"light and where the probe does not run, narrower on a few points until a recount finds lit spots, at "
-              f"most {AUTO_CAP})",
+              f"({100 * good_light:g} % in good light) or sparse in good light",
+              f"`--converge auto`: {CONVERGE_WIDE:g}, or {CONVERGE:g} on point-like scenes ({good_light:g} in good "
+              f"light), on sparse ones in good light and where no probe runs, narrower on a few points until a recount "
+              f"finds lit spots, at most {AUTO_CAP})",
               f"against {reference['iters']} {reference['algorithm'].upper()} iterations"]
     text = " ".join(re.sub(r"```.*?```", "", README.read_text(encoding="utf-8"), flags=re.S).split())
     assert [claim for claim in claims if claim not in text] == []

@@ -184,7 +184,7 @@ def add_solver_options(p: argparse.ArgumentParser):
     """The solver's options: iterations, one weight per prior of the table, stopping rules, skips, backend."""
     from ..algorithms import ALGORITHMS
     from ..solve.priors import PRIORS
-    from ..solve.auto_weights import AUTO_AT, RECOUNT_AT
+    from ..solve.auto_weights import AUTO_AT, POINTS_IN_GOOD_LIGHT_STOP, RECOUNT_AT
     from ..solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE, DEFAULT_ITERS
 
     p.add_argument("--iters", type=iteration_count, default=DEFAULT_ITERS, metavar="N|auto",
@@ -193,7 +193,8 @@ def add_solver_options(p: argparse.ArgumentParser):
     p.add_argument("--converge", type=weight(True), default="auto", metavar="D|auto",
                    help=f"with --iters auto: stop when the estimated relative distance to the converged cube is below "
                         f"D; auto (the default): {CONVERGE:g}, or {CONVERGE_WIDE:g} once iteration {AUTO_AT} shows a "
-                        f"scene that is not point-like (unless sparse in good light), or less on a point-like scene "
+                        f"scene that is not point-like (unless sparse in good light), "
+                        f"{CONVERGE * POINTS_IN_GOOD_LIGHT_STOP:g} on a point-like one in good light, or less on one "
                         f"of few lit voxels ({CONVERGE:g} again where a recount at iteration {RECOUNT_AT} finds lit "
                         f"spots); {CONVERGE:g} where that probe does not run (FISTA, a weight given; "
                         f"docs/convergence.md)")

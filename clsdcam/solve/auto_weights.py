@@ -42,6 +42,15 @@ pixel), the sixteen sources rather than two points. There ADMM halves its penalt
 scenes, halved, needed 0.01, and one in low light ended 0.25 dB short at 0.02 ("A wider stop for a few points in good
 light").
 
+A point-like scene that is not a few points, read in good light (σ̂ under ``GOOD_LIGHT_BELOW``), stops at
+
+    D = ``POINTS_IN_GOOD_LIGHT_STOP``·0.05 = 0.07:
+
+the simulator's narrow-line scenes in standard light, whose answers are the sharpest of every panel, came within the
+rules on ADMM's road with at least 0.16 dB and 0.20° to spare there, where 0.1 left 0.02 dB on one of eleven and, on a
+fresh scene, stopped 0.08 dB outside (docs/convergence.md, "A wider stop for point-like scenes in good light"). In low
+light, and on a few points recounted as lit spots, the stop stays at 0.05.
+
 A scene counted as a few points is counted again at ``RECOUNT_AT``, the first iteration the stop can fire (the
 attribute ``lit_voxels_recounted``). By then ADMM has gathered each point into a few voxels: the simulator's
 sixteen sources count 17–35 and two points 4–21 (120×152 to 144×176), where the narrow-line spots of its lines
@@ -100,6 +109,11 @@ FEW_POINTS_STOP = 0.2
 # and on one in good light, not of the fewest (lighter_few_points): the halved sixteen-source scenes are within at
 # 0.02 on 13 of 13 (96×112 to 160×192; four of them on two fresh panels)
 LIGHTER_FEW_POINTS_STOP = 0.4
+# --converge auto on a point-like scene that is not a few points, in good light (σ̂ under GOOD_LIGHT_BELOW), as a share
+# of --converge: 0.07 keeps ADMM's road, replayed, within 0.2 dB and 0.5° of the answer with at least 0.16 dB and 0.20°
+# to spare on eleven standard-light lines scenes of four panels, where 0.085 and 0.1 leave 0.05 and 0.02 dB; 6755
+# iterations against more than 8475 at 0.05 (docs/convergence.md, "A wider stop for point-like scenes in good light")
+POINTS_IN_GOOD_LIGHT_STOP = 1.4
 # the noise σ̂ (of max|b|) under which the probe reads good light: 0.0022–0.0044 on the simulator's standard-light
 # points and sources (96×112 to 160×192), 0.0057–0.0106 in its low light
 GOOD_LIGHT_BELOW = 0.005
@@ -165,16 +179,17 @@ def sparse_in_good_light(attrs: dict) -> bool:
 
 
 def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: bool, lighter: bool = False,
-                   sparse: bool = False) -> float:
+                   sparse: bool = False, good_light: bool = False) -> float:
     """``--converge auto``'s tolerance from the probe's reading (:func:`probe_reading`, :func:`sparse_in_good_light`,
     the module docstring): ``wide`` on a scene that is not point-like, unless ``sparse`` in good light
     (``converge``); on a point-like one, FEW_POINTS_STOP·``converge`` on a scene of a few points
-    (LIGHTER_FEW_POINTS_STOP· on one to lighten), else ``converge``."""
+    (LIGHTER_FEW_POINTS_STOP· on one to lighten), else POINTS_IN_GOOD_LIGHT_STOP·``converge`` in ``good_light`` and
+    ``converge`` in low light."""
     if not point_like:
         return converge if sparse else wide
     if few_points:
         return converge * (LIGHTER_FEW_POINTS_STOP if lighter else FEW_POINTS_STOP)
-    return converge
+    return converge * POINTS_IN_GOOD_LIGHT_STOP if good_light else converge
 
 
 def measured_mean(problem) -> float:
@@ -250,10 +265,12 @@ class AutoWeights:
         scene that is not point-like unless it is sparse in good light, narrowed on a scene of a few points (less on
         one to lighten); said in a note."""
         p, n, per_pixel = (self.chosen[name] for name in ("mean_over_peak", "lit_voxels", "lit_per_pixel"))
+        noise = self.chosen["noise_estimate"]
         sparse = not point_like and sparse_in_good_light(self.chosen)
-        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points, lighter, sparse)
+        good_light = noise < GOOD_LIGHT_BELOW
+        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points, lighter, sparse,
+                                   good_light)
         if sparse:
-            noise = self.chosen["noise_estimate"]
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (a sparse scene in good light: mean/peak "
                         f"{p:.2g} < {SPARSE_BELOW:g}, noise {noise:.2g} < {SPARSE_LIGHT_BELOW:g})")
         elif not point_like:
@@ -263,10 +280,14 @@ class AutoWeights:
         elif few_points:
             self._narrowed_from = driver.rules.converge
             driver.narrow_stop(tolerance)
-            light = (f"; in good light, noise {self.chosen['noise_estimate']:.2g} < {GOOD_LIGHT_BELOW:g}, and not of "
-                     f"the fewest, ≥ {FEWEST_POINTS_PER_PIXEL:g} a pixel") if lighter else ""
+            light = (f"; in good light, noise {noise:.2g} < {GOOD_LIGHT_BELOW:g}, and not of the fewest, "
+                     f"≥ {FEWEST_POINTS_PER_PIXEL:g} a pixel") if lighter else ""
             driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a point-like scene of few lit voxels: "
                         f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g}{light})")
+        elif good_light:
+            driver.widen_stop(tolerance)
+            driver.note(f"stop: --converge auto, {driver.rules.converge:g} (a point-like scene in good light: noise "
+                        f"{noise:.2g} < {GOOD_LIGHT_BELOW:g})")
 
     def recount(self, problem, driver) -> None:
         """At RECOUNT_AT on a scene the probe read as a few points: its lit voxels n counted again (the attribute
