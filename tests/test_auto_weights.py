@@ -9,8 +9,8 @@ from clsdcam.algorithms.admm.algorithm import LIGHTER_FEW_POINTS, NONNEG, NONNEG
 from clsdcam.solve import auto_weights
 from clsdcam.solve.auto_weights import (AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, FEWEST_POINTS_PER_PIXEL,
                                         GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS_STOP, POINTS_IN_GOOD_LIGHT_STOP,
-                                        RECOUNT_AT, SPARSE_BELOW, SPARSE_LIGHT_BELOW, SPOTS_FROM, AutoWeights, auto_tolerance, probe_reading,
-                                        sparse_in_good_light)
+                                        RECOUNT_AT, SPARSE_BELOW, SPARSE_LIGHT_BELOW, SPOTS_FROM, AutoWeights,
+                                        auto_tolerance, probe_reading, sparse_in_good_light)
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.sim import simulate
