@@ -282,7 +282,7 @@ MANY = (32, 128, 128)     # 0.04 lit voxels a pixel: 655.36 of these, point-like
 def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tolerance, said, few_points):
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
     point-like threshold, CONVERGE·POINTS_IN_GOOD_LIGHT_STOP below it (the probe's σ̂ = 0.003 is good light; low
-    light below), CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
+    light: the next test), CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
     pixel (n/(H·W)); a note says so where it moved. The algorithm hears whether a point-like scene is one of a few
     points (None: not told), and whether it is one to lighten (in the probe's good light, σ̂ = 0.003, and not of the
     fewest, FEWEST_POINTS_PER_PIXEL lit voxels a pixel or more: CONVERGE·LIGHTER_FEW_POINTS_STOP); what it says back

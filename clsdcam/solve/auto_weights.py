@@ -262,8 +262,8 @@ class AutoWeights:
 
     def _tune_stop(self, driver, point_like: bool, few_points: bool, lighter: bool) -> None:
         """``--converge auto`` from the probe's reading (:func:`probe_reading`, the module docstring): widened on a
-        scene that is not point-like unless it is sparse in good light, narrowed on a scene of a few points (less on
-        one to lighten); said in a note."""
+        scene that is not point-like unless it is sparse in good light, less on a point-like one in good light,
+        narrowed on a scene of a few points (less on one to lighten); said in a note."""
         p, n, per_pixel = (self.chosen[name] for name in ("mean_over_peak", "lit_voxels", "lit_per_pixel"))
         noise = self.chosen["noise_estimate"]
         sparse = not point_like and sparse_in_good_light(self.chosen)
