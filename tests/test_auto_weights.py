@@ -316,9 +316,9 @@ def test_a_point_like_scene_in_good_light_stops_wider_and_in_low_light_keeps_the
     stops = [line for line in stand_in.notes if line.startswith("stop: --converge auto, ")]
     assert stops == ([f"stop: --converge auto, {CONVERGE * POINTS_IN_GOOD_LIGHT_STOP:g} (a point-like scene in good "
                       f"light: noise {noise:.2g} < {GOOD_LIGHT_BELOW:g})"] if wider else [])
-    for few, lighter in ((True, False), (True, True)):
+    for lighter in (False, True):
         share = LIGHTER_FEW_POINTS_STOP if lighter else FEW_POINTS_STOP
-        assert auto_tolerance(CONVERGE, CONVERGE_WIDE, True, few, lighter, good_light=True) == CONVERGE * share
+        assert auto_tolerance(CONVERGE, CONVERGE_WIDE, True, True, lighter, good_light=True) == CONVERGE * share
 
 
 @pytest.mark.parametrize("every, sigma, narrow", [

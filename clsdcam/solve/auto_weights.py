@@ -165,10 +165,15 @@ def widely_lit(attrs: dict, widely_lit_above: float) -> bool:
     return p is not None and p >= widely_lit_above
 
 
+def in_good_light(noise: float) -> bool:
+    """Whether the probe's noise σ̂ (of max|b|) reads good light for a point-like scene: under GOOD_LIGHT_BELOW."""
+    return noise < GOOD_LIGHT_BELOW
+
+
 def lighter_few_points(noise: float, lit_per_pixel: float) -> bool:
-    """A scene of a few points read in good light (σ̂ under GOOD_LIGHT_BELOW) and not of the fewest (at least
+    """A scene of a few points read in good light (:func:`in_good_light`) and not of the fewest (at least
     FEWEST_POINTS_PER_PIXEL lit voxels a pixel): ADMM halves its penalties there, and the stop is wider."""
-    return noise < GOOD_LIGHT_BELOW and lit_per_pixel >= FEWEST_POINTS_PER_PIXEL
+    return in_good_light(noise) and lit_per_pixel >= FEWEST_POINTS_PER_PIXEL
 
 
 def sparse_in_good_light(attrs: dict) -> bool:
@@ -267,7 +272,7 @@ class AutoWeights:
         p, n, per_pixel = (self.chosen[name] for name in ("mean_over_peak", "lit_voxels", "lit_per_pixel"))
         noise = self.chosen["noise_estimate"]
         sparse = not point_like and sparse_in_good_light(self.chosen)
-        good_light = noise < GOOD_LIGHT_BELOW
+        good_light = in_good_light(noise)
         tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points, lighter, sparse,
                                    good_light)
         if sparse:
