@@ -10,7 +10,7 @@ from clsdcam.solve import auto_weights
 from clsdcam.solve.auto_weights import (AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, FEWEST_POINTS_PER_PIXEL,
                                         GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS_STOP, POINTS_IN_GOOD_LIGHT_STOP,
                                         RECOUNT_AT, SPARSE_BELOW, SPARSE_LIGHT_BELOW, SPOTS_FROM, AutoWeights,
-                                        auto_tolerance, probe_reading, sparse_in_good_light)
+                                        auto_tolerance, probe_reading, recount_reroutes, sparse_in_good_light)
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.sim import simulate
@@ -74,13 +74,16 @@ class Residual:
     def note(self, *lines):
         self.notes += lines
 
-    def point_like(self, few_points, lighter):
+    def point_like(self, few_points):
         self.told_point_like += 1
-        self.told_few_points, self.told_lighter = few_points, lighter
+        self.told_few_points = few_points
         return "stand-in: told"
 
     def lit_spots(self):
         return "stand-in: spots"
+
+    def few_points_to_lighten(self):
+        return "stand-in: a few points to lighten"
 
     def reroute(self, line):
         self.rerouted.append(line)
@@ -210,7 +213,7 @@ def test_a_solve_reads_the_window_of_its_iterate_and_lightens_a_point_scene(monk
     penalties = admm.state.carry[0].penalties          # μ₂ and μ₃ share their scale (penalties_for)
     assert penalties.nonneg / penalties.tv == pytest.approx(NONNEG_FEW_POINTS / TV, rel=1e-12)   # a few points
     said = f"admm: μ₃ × {NONNEG_FEW_POINTS / NONNEG:g}, wider TV thresholds (a scene of a few points)"
-    lighter = f"every penalty × {LIGHTER_FEW_POINTS:g} (in good light, not of the fewest points)"
+    lighter = f"every penalty × {LIGHTER_FEW_POINTS:g}"
     assert noise < GOOD_LIGHT_BELOW and admm.attrs["lit_per_pixel"] < FEWEST_POINTS_PER_PIXEL     # the fewest points
     assert said in admm.attrs["skips"] and lighter not in admm.attrs["skips"]
     told, real = [], balance.balance
@@ -247,9 +250,9 @@ def test_a_solve_weighs_a_widely_lit_scene_in_low_light_more():
     (0.99 * GOOD_LIGHT_BELOW, 0.99 * FEWEST_POINTS_PER_PIXEL, False),   # the fewest points
 ])
 def test_a_few_points_are_lightened_in_good_light_unless_they_are_the_fewest(noise, per_pixel, lighter):
-    """The probe's third reading, at its two gates, and the stop it sets on a scene of a few points:
-    CONVERGE·LIGHTER_FEW_POINTS_STOP where it holds, CONVERGE·FEW_POINTS_STOP where not; a scene that is not a few
-    points is never lightened."""
+    """The probe's third reading, at its two gates, and the stop a scene of a few points ends at:
+    CONVERGE·LIGHTER_FEW_POINTS_STOP where it holds (from the recount), CONVERGE·FEW_POINTS_STOP where not; a scene
+    that is not a few points is never lightened."""
     attrs = {"mean_over_peak": 0.0001, "lit_per_pixel": per_pixel, "noise_estimate": noise}
     assert probe_reading(attrs, 0.0025) == (True, True, lighter)
     assert probe_reading({**attrs, "lit_per_pixel": FEW_POINTS_PER_PIXEL}, 0.0025) == (True, False, False)
@@ -269,8 +272,9 @@ MANY = (32, 128, 128)     # 0.04 lit voxels a pixel: 655.36 of these, point-like
 @pytest.mark.parametrize("cube, tolerance, said, few_points", [
     (lit_voxels(656, MANY), CONVERGE * POINTS_IN_GOOD_LIGHT_STOP, "a point-like scene in good light: noise 0.003 < "
      "0.005", False),                                   # point-like, not a few points, in good light
-    (lit_voxels(655, MANY), CONVERGE * LIGHTER_FEW_POINTS_STOP, "few lit voxels: 655, 0.03998 a pixel < 0.04; in good "
-     "light, noise 0.003 < 0.005, and not of the fewest, ≥ 0.012 a pixel", True),
+    (lit_voxels(655, MANY), CONVERGE * POINTS_IN_GOOD_LIGHT_STOP, "a point-like scene in good light: noise 0.003 < "
+     "0.005; few lit voxels, 655, 0.03998 a pixel < 0.04, not of the fewest, ≥ 0.012: counted again at 180",
+     False),                                            # a few points to lighten: point-like until the recount
     (lit_voxels(93, (32, 48, 48)), CONVERGE * POINTS_IN_GOOD_LIGHT_STOP, "a point-like scene in good light",
      False),                                                  # under 500 lit voxels, over 0.04 a pixel: not a few
     (lit_voxels(120), CONVERGE * FEW_POINTS_STOP, "a point-like scene of few lit voxels: 120, 0.007324 a pixel < 0.04",
@@ -283,16 +287,14 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tol
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
     point-like threshold, CONVERGE·POINTS_IN_GOOD_LIGHT_STOP below it (the probe's σ̂ = 0.003 is good light; low
     light: the next test), CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
-    pixel (n/(H·W)); a note says so where it moved. The algorithm hears whether a point-like scene is one of a few
-    points (None: not told), and whether it is one to lighten (in the probe's good light, σ̂ = 0.003, and not of the
-    fewest, FEWEST_POINTS_PER_PIXEL lit voxels a pixel or more: CONVERGE·LIGHTER_FEW_POINTS_STOP); what it says back
-    is noted."""
+    pixel (n/(H·W)), unless the scene is one to lighten (in the probe's good light, σ̂ = 0.003, and not of the
+    fewest, FEWEST_POINTS_PER_PIXEL lit voxels a pixel or more), told point-like until the recount; a note says so
+    where it moved. The algorithm hears whether a point-like scene is one of a few points (None: not told); what it
+    says back is noted."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)
     assert stand_in.told_few_points is few_points
     assert weights.chosen["noise_estimate"] == pytest.approx(0.003, 0.05)
-    lighter = bool(few_points) and weights.chosen["lit_per_pixel"] >= FEWEST_POINTS_PER_PIXEL
-    assert few_points is None or stand_in.told_lighter is lighter
     assert ("stand-in: told" in stand_in.notes) == (few_points is not None)      # what the algorithm said, noted
     assert stand_in.rules.converge == pytest.approx(tolerance, rel=1e-12)
     assert weights.chosen["lit_voxels"] == pytest.approx(cube.sum() / cube.max() if cube.any() else cube.size)
@@ -377,6 +379,46 @@ def test_a_few_points_counted_again_as_lit_spots_tell_the_algorithm_and_take_bac
     stop = f"stop: --converge auto, {CONVERGE:g} (lit spots)"
     assert said == ([recounted] + ([stop] if wide_stop else []) if spots else [])
     assert weights.due_in(0, 10_000) is None
+
+
+@pytest.mark.parametrize("wide_stop", [CONVERGE_WIDE, None])
+@pytest.mark.parametrize("lit", [SPOTS_FROM, SPOTS_FROM - 1])
+def test_a_few_points_to_lighten_counted_again_as_a_few_points_tell_the_algorithm_and_narrow_the_stop(lit, wide_stop):
+    """A scene read as a few points to lighten at AUTO_AT (655 lit voxels, 0.04 a pixel, in good light), told
+    point-like with the point-like scenes' stop in good light, is counted again at RECOUNT_AT: under SPOTS_FROM lit
+    voxels it is a few points, said in a note, the algorithm told (``few_points_to_lighten``, its line rerouting the
+    driver), and a stop --converge auto tuned (``wide_stop`` set) narrows to CONVERGE·LIGHTER_FEW_POINTS_STOP; at
+    SPOTS_FROM or more nothing changes. Without --converge auto the stop never moves, but the algorithm is told all
+    the same."""
+    weights, stand_in = hook(point_like_below=0.0025, wide_stop=wide_stop), Residual(0.003, lit_voxels(655, MANY))
+    weights.act(stand_in, stand_in)
+    assert stand_in.told_few_points is False and weights.due_in(AUTO_AT, RECOUNT_AT - AUTO_AT) == RECOUNT_AT - AUTO_AT
+    told = CONVERGE * POINTS_IN_GOOD_LIGHT_STOP if wide_stop else CONVERGE
+    assert stand_in.rules.converge == pytest.approx(told, rel=1e-12)
+    stand_in.cube, stand_in.iterations = lit_voxels(lit, MANY), RECOUNT_AT
+    weights.act(stand_in, stand_in)
+    assert weights.chosen["lit_voxels_recounted"] == pytest.approx(lit, rel=1e-12)
+    few = lit < SPOTS_FROM
+    narrowed = CONVERGE * LIGHTER_FEW_POINTS_STOP if wide_stop else CONVERGE
+    assert stand_in.rules.converge == pytest.approx(narrowed if few else told, rel=1e-12)
+    assert stand_in.rerouted == (["stand-in: a few points to lighten"] if few else [])
+    said = [line for line in stand_in.notes if "recount" in line or "(a few points in good light)" in line]
+    recounted = f"recount: a few points ({lit} lit voxels at iteration {RECOUNT_AT} < {SPOTS_FROM})"
+    stop = f"stop: --converge auto, {narrowed:.2g} (a few points in good light)"
+    assert said == ([recounted] + ([stop] if wide_stop else []) if few else [])
+    assert weights.due_in(0, 10_000) is None
+
+
+@pytest.mark.parametrize("point_like, lighter, spots, rerouted", [
+    (True, False, True, True), (True, False, False, False),     # a few points: lit spots reroute
+    (True, True, False, True), (True, True, True, False),       # a few points to lighten: a few points reroute
+    (False, False, True, False),                                # not point-like: never counted
+])
+def test_recount_reroutes_where_the_recount_changed_the_road(point_like, lighter, spots, rerouted):
+    attrs = {"mean_over_peak": 0.001 if point_like else 0.1, "noise_estimate": 0.003 if lighter else 0.01,
+             "lit_per_pixel": 0.02, "lit_voxels_recounted": SPOTS_FROM if spots else SPOTS_FROM - 1}
+    assert recount_reroutes(attrs, 0.0025) is rerouted
+    assert recount_reroutes({key: attrs[key] for key in list(attrs)[:3]}, 0.0025) is False      # not counted
 
 
 @pytest.mark.parametrize("cube", [np.full((4, 32, 32), 0.5), lit_voxels(656, MANY)])

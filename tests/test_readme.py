@@ -330,8 +330,8 @@ def test_every_figure_of_the_readme_is_the_codes():
               f"within {100 * CONVERGE_WIDE:g} % of that minimiser, {100 * CONVERGE:g} % where the scene is point-like "
               f"({100 * good_light:g} % in good light) or sparse in good light",
               f"`--converge auto`: {CONVERGE_WIDE:g}, or {CONVERGE:g} on point-like scenes ({good_light:g} in good "
-              f"light), on sparse ones in good light and where no probe runs, narrower on a few points until a recount "
-              f"finds lit spots, at most {AUTO_CAP})",
+              f"light), on sparse ones in good light and where no probe runs, narrower on a few points as a recount "
+              f"reads them, at most {AUTO_CAP})",
               f"against {reference['iters']} {reference['algorithm'].upper()} iterations"]
     text = " ".join(re.sub(r"```.*?```", "", README.read_text(encoding="utf-8"), flags=re.S).split())
     assert [claim for claim in claims if claim not in text] == []

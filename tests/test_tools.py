@@ -361,14 +361,15 @@ def test_bench_converged_measures_admm_variants_and_restores_the_constants(tmp_p
     assert "| 0 | piecewise, standard | alpha 1, balance_at 1e+09 | 0 |" in out
 
 
-def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_restores_the_method():
+def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_restores_the_method(monkeypatch):
     """A solve at a given weight reads no probe: told, ADMM's μ₃ falls to NONNEG_POINT_LIKE/NONNEG of its value after
     AUTO_AT iterations, as the default's does on a point-like scene, and told a few points to NONNEG_FEW_POINTS/NONNEG,
     its TV balance at that iteration taking the point-like scenes' wider thresholds, or the few points' wider still;
-    told a few points in good light and not of the fewest (``lighter``), μ₁ and μ₃ are then LIGHTER_FEW_POINTS of those
-    and the balance sets the same μ₂,d (its thresholds are the iterate's); told lit spots as well, after RECOUNT_AT
-    iterations μ₁ is the camera's again and μ₃ NONNEG_POINT_LIKE of μ₂'s scale (``Admm.lit_spots``); not told, or before
-    that iteration, or after the context, it keeps its penalties."""
+    told a few points in good light and not of the fewest (``lighter``), it takes the point-like scene's penalties, and
+    after RECOUNT_AT iterations the few points' with μ₁ and μ₃ LIGHTER_FEW_POINTS of those, the TV balanced again
+    with the few points' C (``Admm.few_points_to_lighten``), unless told lit spots as well; told lit spots on a few
+    points, after RECOUNT_AT iterations μ₃ is NONNEG_POINT_LIKE of μ₂'s scale (``Admm.lit_spots``); not told, or
+    before that iteration, or after the context, it keeps its penalties."""
     from clsdcam.algorithms.admm import algorithm, balance
     from clsdcam.sim import simulate
 
@@ -390,15 +391,19 @@ def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_
     wider = balance.THRESHOLD_OVER_RMS / balance.THRESHOLD_POINT_LIKE             # C = 8 against 2: lower penalties
     assert point_like.tv_balance == pytest.approx([wider * k for k in kept.tv_balance], rel=1e-9)
     assert all(f < p for f, p in zip(few.tv_balance, point_like.tv_balance))     # C = 16 against 8: lower still
-    bright = penalties(AUTO_AT + 2, point_like=True, few_points=True, lighter=True)
-    assert bright.data == pytest.approx(few.data * algorithm.LIGHTER_FEW_POINTS, rel=1e-12)
-    assert bright.nonneg == pytest.approx(few.nonneg * algorithm.LIGHTER_FEW_POINTS, rel=1e-12)
-    assert [bright.tv_along(axis) for axis in range(3)] == pytest.approx([few.tv_along(axis) for axis in range(3)],
-                                                                         rel=1e-9)
     assert penalties(AUTO_AT, point_like=True).nonneg == kept.nonneg
-    spots = penalties(RECOUNT_AT + 1, point_like=True, few_points=True, lighter=True, spots=True)
+    lighter = {"point_like": True, "few_points": True, "lighter": True}
+    assert penalties(AUTO_AT + 2, **lighter) == point_like                  # told point-like until the recount
+    scenes, real = [], balance.balance
+    monkeypatch.setattr(balance, "balance", lambda *a: scenes.append(a[3:]) or real(*a))
+    bright = penalties(RECOUNT_AT + 1, **lighter)                           # a few points then, lightened
+    assert scenes == [("point_like",), ("few_points",)]                     # balanced again with C = 16
+    assert bright.data == pytest.approx(kept.data * algorithm.LIGHTER_FEW_POINTS, rel=1e-12)
+    assert bright.nonneg == pytest.approx(few.nonneg * algorithm.LIGHTER_FEW_POINTS, rel=1e-12)
+    assert penalties(RECOUNT_AT + 1, **lighter, spots=True) == penalties(RECOUNT_AT + 1, point_like=True)
+    spots = penalties(RECOUNT_AT + 1, point_like=True, few_points=True, spots=True)
     assert spots.nonneg / spots.tv == pytest.approx(algorithm.NONNEG_POINT_LIKE / algorithm.TV, rel=1e-12)
-    assert spots.data == pytest.approx(kept.data, rel=1e-12)           # the camera's again: no longer lightened
+    assert spots.data == pytest.approx(kept.data, rel=1e-12)           # the camera's
     assert spots.tv_balance is not None and spots.tv_balance != few.tv_balance      # balanced again, C = 2
     assert penalties(RECOUNT_AT, point_like=True, few_points=True, spots=True) == penalties(RECOUNT_AT, **few_told)
     assert Admm.iterate is plain

@@ -10,7 +10,7 @@ with no stop, its cube scored every 25 (where the stop's windows close: 55, 80, 
 is held until the end, 240 of them at 6000 iterations). The *answer* is the last cube scored (5980 of 6000): its PSNR
 and mean spectral angle, and how far they moved over the last 1000 iterations (a check that it is one). The stop's
 estimate (:class:`clsdcam.solve.convergence.DistanceEstimate`, started afresh at AUTO_AT as the default's is, and
-at RECOUNT_AT where its recount found lit spots) is replayed on the run, at most AUTO_CAP iterations:
+at RECOUNT_AT where its recount changed the road) is replayed on the run, at most AUTO_CAP iterations:
 
 * at the tolerance ``--converge auto`` takes from the run's probe (:func:`clsdcam.solve.auto_weights.auto_tolerance`):
   where the default stops;
@@ -31,8 +31,8 @@ from bench_converged import curve, timed_solve, within
 from bench_panel import add_kinds_option, chosen_scenes, panel_scene, scene_done, scene_indices
 from bench_stop import replay, save_grid, scene_grid
 from clsdcam.algorithms.admm.algorithm import POINT_LIKE_BELOW
-from clsdcam.solve.auto_weights import (AUTO_AT, RECOUNT_AT, auto_tolerance, probe_reading, recount_reading,
-                                        sparse_in_good_light)
+from clsdcam.solve.auto_weights import (AUTO_AT, RECOUNT_AT, auto_tolerance, in_good_light, probe_reading,
+                                        recount_reading, recount_reroutes, sparse_in_good_light)
 from clsdcam.solve.convergence import WINDOW
 from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE
 
@@ -47,7 +47,7 @@ def default_run(sim, iters: int) -> tuple[dict, list[dict]]:
     marks = sorted({*range(AUTO_AT + WINDOW, iters + 1, WINDOW), *([AUTO_CAP] if AUTO_CAP <= iters else [])})
     result, _ = timed_solve(sim, {"iters": iters, "algorithm": "admm"}, marks)
     changes = [r["change"] for r in result.history]
-    starts = [AUTO_AT] + ([RECOUNT_AT] if recount_reading(result.attrs) else [])   # where its estimate starts
+    starts = [AUTO_AT] + ([RECOUNT_AT] if recount_reroutes(result.attrs, POINT_LIKE_BELOW) else [])   # its estimate's
     estimates = {start: replay(changes[start:], WINDOW) for start in starts}
     points = curve(sim, result)
     for point in points:
@@ -71,9 +71,10 @@ def run_scene(plan: dict, args) -> dict:
     attrs, points = default_run(sim, args.iters)
     answer, before = points[-1], next(p for p in points if p["iteration"] >= points[-1]["iteration"] - SETTLED_OVER)
     point_like, few_points, lighter = probe_reading(attrs, POINT_LIKE_BELOW)
-    default = (CONVERGE if recount_reading(attrs)
-               else auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points, lighter,
-                                   sparse_in_good_light(attrs)))
+    spots = recount_reading(attrs)
+    default = (CONVERGE if spots and not lighter
+               else auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points and not spots, lighter,
+                                   sparse_in_good_light(attrs), in_good_light(attrs["noise_estimate"])))
     return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
             "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
             "lighter": lighter, "noise": attrs["noise_estimate"],

@@ -131,9 +131,10 @@ def scene_weight(sim, weight_from: str) -> tuple[float, dict]:
 @contextmanager
 def told_point_like(point_like: bool = False, few_points: bool = False, lighter: bool = False, spots: bool = False):
     """While it lasts, where ``point_like``, every ADMM solve is told so before its iteration AUTO_AT + 1 (and
-    whether the scene is ``few_points``, and one to make ``lighter``), as the default's probe tells it
-    (``Admm.point_like``), and where a few points were recounted as lit ``spots``, that before its iteration
-    RECOUNT_AT + 1 (``Admm.lit_spots``): a run at a given weight reads no probe, so without this it would keep the
+    whether the scene is ``few_points``, unless it is one to make ``lighter``), as the default's probe tells it
+    (``Admm.point_like``), and before its iteration RECOUNT_AT + 1 what the recount found: a few points recounted as
+    lit ``spots`` (``Admm.lit_spots``), or a few points to make lighter recounted as such (not ``spots``:
+    ``Admm.few_points_to_lighten``). A run at a given weight reads no probe, so without this it would keep the
     penalties of the spread scenes where the default's change. (A stop replayed on such a run forgets its windows at
     AUTO_AT alone, :func:`replay_stop`, where the default's also does at the recount.) Only for solves at a given
     weight: a solve with ``--tv auto`` reads its own probe and would be told twice."""
@@ -143,9 +144,9 @@ def told_point_like(point_like: bool = False, few_points: bool = False, lighter:
 
     def iterate(algorithm, problem):
         if algorithm._iterations == AUTO_AT:
-            algorithm.point_like(few_points, lighter)
-        if algorithm._iterations == RECOUNT_AT and few_points and spots:
-            algorithm.lit_spots()
+            algorithm.point_like(few_points and not lighter)
+        if algorithm._iterations == RECOUNT_AT and few_points and spots != lighter:
+            algorithm.few_points_to_lighten() if lighter else algorithm.lit_spots()
         return plain(algorithm, problem)
 
     Admm.iterate = iterate if point_like else plain

@@ -23,8 +23,8 @@ falls below it, the true distance then, and whether the run is within the rules 
 ``stop.json``, ``stop.md`` and ``stop.png`` (the true distance and both estimates against iterations, one panel a
 scene). The run is at a fixed τ from its first iteration (the default's own run chooses τ at iteration 30 and
 forgets its windows there); at iteration 30 it is told what the default's probe found (a point-like scene, a few
-points), and at 180 what its recount found (lit spots: ``bench_converged.told_point_like``), so its penalties are the
-default's.
+points), and at 180 what its recount found (lit spots, or a few points to lighten:
+``bench_converged.told_point_like``), so its penalties are the default's.
 """
 from __future__ import annotations
 

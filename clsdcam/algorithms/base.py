@@ -87,18 +87,24 @@ class Algorithm:
         """Every iterate through ``mapping`` (into another space), momentum kept."""
         raise InputError(f"--algorithm {self.name} runs in band space: no --subspace or --rank")
 
-    def point_like(self, few_points: bool = False, lighter: bool = False) -> str | None:
-        """The auto weights' probe found the scene point-like (:mod:`clsdcam.solve.auto_weights`), whether it is a
-        scene of ``few_points``, and one to make ``lighter`` (a few points in good light, not of the fewest:
-        ``lighter_few_points``): an algorithm with a setting of its own for such scenes takes it (ADMM: a lighter
-        non-negativity penalty, on a few points wider TV thresholds, and every penalty lighter where told) and
-        returns a line for the solve's notes that says what it did. Nothing by default (None)."""
+    def point_like(self, few_points: bool = False) -> str | None:
+        """The auto weights' probe found the scene point-like (:mod:`clsdcam.solve.auto_weights`), and whether it is a
+        scene of ``few_points`` (a few points in good light, not of the fewest, are told point-like, and told again
+        at the recount: :meth:`few_points_to_lighten`): an algorithm with a setting of its own for such scenes takes it
+        (ADMM: a lighter non-negativity penalty, on a few points wider TV thresholds) and returns a line for the
+        solve's notes that says what it did. Nothing by default (None)."""
 
     def lit_spots(self) -> str | None:
         """The scene :meth:`point_like` was told is of a few points was counted again later and is one of lit spots
         (:mod:`clsdcam.solve.auto_weights`, its recount): an algorithm that took a setting for a few points takes the
         one for a point-like scene instead (ADMM: its penalties for one, the TV balanced again) and returns a line
         that says so. Nothing by default (None)."""
+
+    def few_points_to_lighten(self) -> str | None:
+        """The scene :meth:`point_like` was told is point-like, read in good light as a few points not of the fewest,
+        was counted again later and is one of a few points (the recount): an algorithm with a setting for them takes
+        it (ADMM: the few points' penalties, every one lighter, the TV balanced again) and returns a line that says
+        so. Nothing by default (None)."""
 
     def carry(self):
         """What a video's next frame resumes from besides its iterate (:class:`clsdcam.solve.state.SolverState`), or

@@ -37,10 +37,14 @@ a fresh sixteen-source scene of 402 lit voxels 1.14 dB short of its answer.
 
 The probe's noise σ̂ and count read a third thing: a scene of a few points in good light (σ̂ under
 ``GOOD_LIGHT_BELOW`` of max|b|) that is not of the fewest (at least ``FEWEST_POINTS_PER_PIXEL`` lit voxels a window
-pixel), the sixteen sources rather than two points. There ADMM halves its penalties, and the stop is
+pixel), the sixteen sources rather than two points, but also the narrow-line spots of half the simulator's lines
+scenes in standard light. Such a scene is told point-like, and stops as one in good light (below), until the recount
+(below) finds it a few points: then ADMM takes the few points' penalties, every one halved, and the stop narrows to
 ``LIGHTER_FEW_POINTS_STOP``·0.05 = 0.02: so halved, the sixteen-source scenes need 0.02–0.05, where the two-point
 scenes, halved, needed 0.01, and one in low light ended 0.25 dB short at 0.02 ("A wider stop for a few points in good
-light").
+light"). Told a few points from AUTO_AT instead, the lines scenes read so took 1.8 times the iterations on a fresh
+panel, the recount then putting them on the point-like road from a worse start, and the sixteen sources, at the cap
+both ways, gained nothing (docs/convergence.md, "A few points in good light told point-like until the recount").
 
 A point-like scene that is not a few points, read in good light (σ̂ under ``GOOD_LIGHT_BELOW``), stops at
 
@@ -49,17 +53,19 @@ A point-like scene that is not a few points, read in good light (σ̂ under ``GO
 the simulator's narrow-line scenes in standard light, whose answers are the sharpest of every panel, came within the
 rules on ADMM's road with at least 0.16 dB and 0.20° to spare there, where 0.1 left 0.02 dB on one of eleven and, on a
 fresh scene, stopped 0.08 dB outside (docs/convergence.md, "A wider stop for point-like scenes in good light"). In low
-light, and on a few points recounted as lit spots, the stop stays at 0.05.
+light, and on a few points not to lighten recounted as lit spots, the stop stays at 0.05.
 
-A scene counted as a few points is counted again at ``RECOUNT_AT``, the first iteration the stop can fire (the
-attribute ``lit_voxels_recounted``). By then ADMM has gathered each point into a few voxels: the simulator's
-sixteen sources count 17–35 and two points 4–21 (120×152 to 144×176), where the narrow-line spots of its lines
-scenes, which at AUTO_AT count as few as sixteen sources do, still count 88–367 (128×160). From ``SPOTS_FROM`` lit
-voxels the scene is one of lit spots: the algorithm takes its setting for a point-like scene instead
-(``Algorithm.lit_spots``; ADMM its point-like penalties, the TV balanced again), the estimate forgets its windows where
-that changed the iteration, and the stop goes back to the tolerance it narrowed. Counted in voxels, not per pixel:
-gathered, a point lights a few voxels whatever the sensor, where the spots grow with the field (docs/convergence.md,
-"A few points counted again").
+A scene counted as a few points is counted again at ``RECOUNT_AT``, the first iteration the stop can fire (the attribute
+``lit_voxels_recounted``). By then ADMM has gathered each point into a few voxels: on the few points' road the
+simulator's sixteen sources count 17–35 and two points 4–21 (120×152 to 144×176), where the narrow-line spots of its
+lines scenes, which at AUTO_AT count as few as sixteen sources do, still count 88–367 (128×160); on the point-like road,
+where a few points to lighten go, the sixteen sources count 18–53 (96×112 to 160×192) and the lines scenes 106–396
+(96×112 and 128×160). From ``SPOTS_FROM`` lit voxels the scene is one of lit spots: one told a few points takes the
+algorithm's setting for a point-like scene instead (``Algorithm.lit_spots``; ADMM its point-like penalties, the TV
+balanced again), and its stop goes back to the tolerance it narrowed; under it, one told point-like takes the setting
+for a few points to lighten (``Algorithm.few_points_to_lighten``) and the stop narrows. Either way the estimate forgets
+its windows where that changed the iteration. Counted in voxels, not per pixel: gathered, a point lights a few voxels
+whatever the sensor, where the spots grow with the field (docs/convergence.md, "A few points counted again").
 
 A scene that is not point-like but sparse in good light, p under ``SPARSE_BELOW`` and σ̂ under ``SPARSE_LIGHT_BELOW``
 (the simulator's sparse scenes of a few sources on a dim background, in its standard light), keeps the narrow
@@ -133,7 +139,9 @@ RECOUNT_AT = AUTO_AT + FIRST_READING
 # lit voxels (sum/peak over the window) at RECOUNT_AT from which such a scene is one of lit spots, its stop back to
 # --converge: ADMM has gathered the simulator's sixteen sources into 17–35 and two points into 4–21 by then (120×152 to
 # 144×176), the narrow-line spots counted as a few points at AUTO_AT into 104–367 (128×160), a fresh panel's into
-# 88–314 (docs/convergence.md, "A few points counted again")
+# 88–314 (docs/convergence.md, "A few points counted again"); on the point-like road, where a few points to lighten
+# are told to go until then, the sixteen sources into 18–53 and those spots into 106–396 ("A few points in good light
+# told point-like until the recount")
 SPOTS_FROM = 64
 # lit voxels a window pixel under which a scene of a few points is of the fewest: the simulator's two-point scenes count
 # 0.003–0.009, its sixteen sources 0.0136–0.030 at every size measured (96×112 to 160×192)
@@ -155,6 +163,14 @@ def recount_reading(attrs: dict) -> bool:
     """Whether the recount (``lit_voxels_recounted`` of a solve or its result, at RECOUNT_AT on a scene read as a few
     points) found lit spots, SPOTS_FROM lit voxels or more. False where it did not count."""
     return attrs.get("lit_voxels_recounted", 0.0) >= SPOTS_FROM
+
+
+def recount_reroutes(attrs: dict, point_like_below: float) -> bool:
+    """Whether the recount of a solve or its result changed its road (:meth:`AutoWeights.recount`): lit spots found
+    on a few points told so, or a few points found on a few points to lighten, told point-like until then. False
+    where it did not count."""
+    _, few_points, lighter = probe_reading(attrs, point_like_below)
+    return few_points and "lit_voxels_recounted" in attrs and recount_reading(attrs) != lighter
 
 
 def widely_lit(attrs: dict, widely_lit_above: float) -> bool:
@@ -224,7 +240,8 @@ class AutoWeights:
         self.wide_stop = wide_stop                    # the stop's tolerance where p passes (None: it stays)
         self.chosen: dict = {}          # what was chosen, for the result's attributes
         self._recount_due = False       # a few points read at AUTO_AT, not yet counted again
-        self._narrowed_from: float | None = None   # the stop's tolerance before a few points narrowed it
+        self._to_lighten = False        # and told point-like until then: a few points in good light, not the fewest
+        self._untuned: float | None = None   # the stop's tolerance before the probe tuned it (None: not tuned)
 
     def due_in(self, done: int, iters: int) -> int | None:
         """Iterations from ``done`` until the hook acts (at AUTO_AT while a weight is pending, at RECOUNT_AT while a
@@ -260,21 +277,22 @@ class AutoWeights:
                         f"residual at iteration {driver.iterations}{scene})")
         driver.rescore(problem.objective)
         if point_like:
-            driver.note(driver.algorithm.point_like(few_points, lighter))
-        self._recount_due = few_points
+            driver.note(driver.algorithm.point_like(few_points and not lighter))
+        self._recount_due, self._to_lighten = few_points, lighter
         if self.wide_stop and "mean_over_peak" in self.chosen:
             self._tune_stop(driver, point_like, few_points, lighter)
 
     def _tune_stop(self, driver, point_like: bool, few_points: bool, lighter: bool) -> None:
         """``--converge auto`` from the probe's reading (:func:`probe_reading`, the module docstring): widened on a
-        scene that is not point-like unless it is sparse in good light, less on a point-like one in good light,
-        narrowed on a scene of a few points (less on one to lighten); said in a note."""
+        scene that is not point-like unless it is sparse in good light, less on a point-like one in good light (a few
+        points to lighten among them, until the recount), narrowed on a scene of a few points; said in a note."""
         p, n, per_pixel = (self.chosen[name] for name in ("mean_over_peak", "lit_voxels", "lit_per_pixel"))
         noise = self.chosen["noise_estimate"]
         sparse = not point_like and sparse_in_good_light(self.chosen)
         good_light = in_good_light(noise)
-        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points, lighter, sparse,
-                                   good_light)
+        self._untuned = driver.rules.converge
+        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points and not lighter,
+                                   sparse=sparse, good_light=good_light)
         if sparse:
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (a sparse scene in good light: mean/peak "
                         f"{p:.2g} < {SPARSE_BELOW:g}, noise {noise:.2g} < {SPARSE_LIGHT_BELOW:g})")
@@ -282,35 +300,52 @@ class AutoWeights:
             driver.widen_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "
                         f"{p:.2g} ≥ {self.point_like_below:g})")
-        elif few_points:
-            self._narrowed_from = driver.rules.converge
+        elif few_points and not lighter:
             driver.narrow_stop(tolerance)
-            light = (f"; in good light, noise {noise:.2g} < {GOOD_LIGHT_BELOW:g}, and not of the fewest, "
-                     f"≥ {FEWEST_POINTS_PER_PIXEL:g} a pixel") if lighter else ""
             driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a point-like scene of few lit voxels: "
-                        f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g}{light})")
+                        f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g})")
         elif good_light:
             driver.widen_stop(tolerance)
+            few = (f"; few lit voxels, {n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g}, not of the fewest, "
+                   f"≥ {FEWEST_POINTS_PER_PIXEL:g}: counted again at {RECOUNT_AT}") if lighter else ""
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (a point-like scene in good light: noise "
-                        f"{noise:.2g} < {GOOD_LIGHT_BELOW:g})")
+                        f"{noise:.2g} < {GOOD_LIGHT_BELOW:g}{few})")
 
     def recount(self, problem, driver) -> None:
         """At RECOUNT_AT on a scene the probe read as a few points: its lit voxels n counted again (the attribute
-        ``lit_voxels_recounted``). From SPOTS_FROM the scene is one of lit spots, said in a note: the algorithm takes
-        its setting for a point-like scene (``Algorithm.lit_spots``; the estimate forgets its windows where that
-        changed the iteration), and a stop narrowed for a few points goes back to the tolerance it had (the module
-        docstring)."""
+        ``lit_voxels_recounted``; the module docstring). A scene told point-like as a few points to lighten is one of a
+        few points under SPOTS_FROM (:meth:`_few_points_to_lighten`); any other is one of lit spots from SPOTS_FROM
+        (:meth:`_lit_spots`)."""
         self._recount_due = False
         p, voxels, _ = window_reading(problem, driver.x)
         n = self.chosen["lit_voxels_recounted"] = p * voxels
-        if not recount_reading(self.chosen):
-            return
+        spots = recount_reading(self.chosen)
+        if self._to_lighten and not spots:
+            self._few_points_to_lighten(driver, n)
+        elif spots and not self._to_lighten:
+            self._lit_spots(driver, n)
+
+    def _lit_spots(self, driver, n: float) -> None:
+        """A few points found to be lit spots, said in a note: the algorithm takes its setting for a point-like scene
+        (``Algorithm.lit_spots``; the estimate forgets its windows where that changed the iteration), and a stop the
+        probe narrowed goes back to the tolerance it had."""
         driver.note(f"recount: lit spots, not a few points ({n:.0f} lit voxels at iteration {driver.iterations} ≥ "
                     f"{SPOTS_FROM})")
         driver.reroute(driver.algorithm.lit_spots())
-        if self._narrowed_from is not None:
-            driver.widen_stop(self._narrowed_from)
+        if self._untuned is not None:
+            driver.widen_stop(self._untuned)
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (lit spots)")
+
+    def _few_points_to_lighten(self, driver, n: float) -> None:
+        """A scene told point-like as a few points to lighten found to be a few points, said in a note: the algorithm
+        takes its setting for them (``Algorithm.few_points_to_lighten``; the estimate forgets its windows where that
+        changed the iteration), and a stop the probe tuned narrows to LIGHTER_FEW_POINTS_STOP of the tolerance it
+        had."""
+        driver.note(f"recount: a few points ({n:.0f} lit voxels at iteration {driver.iterations} < {SPOTS_FROM})")
+        driver.reroute(driver.algorithm.few_points_to_lighten())
+        if self._untuned is not None:
+            driver.narrow_stop(self._untuned * LIGHTER_FEW_POINTS_STOP)
+            driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a few points in good light)")
 
     def _measure_likeness(self, problem, x) -> None:
         """The iterate's window's p = mean/max, kept as the attribute ``mean_over_peak``, n = p times the window's

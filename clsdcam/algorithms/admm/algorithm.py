@@ -11,12 +11,13 @@ The iterate the driver sees is w, the non-negative copy of v. The penalties star
 is not used: docs/admm.md). After ``BALANCE_AT`` iterations the TV split's is set along each axis from the iterate's
 differences, once (:mod:`.balance`); where the auto weights' probe finds the scene point-like (at the same iteration),
 the non-negativity split's drops to ``NONNEG_POINT_LIKE`` while the balance widens its thresholds, and on a scene of a
-few points to ``NONNEG_FEW_POINTS`` while the balance widens them further; on a scene of a few points in good light (the
-probe's noise σ̂ under ``GOOD_LIGHT_BELOW`` of max|b|) every penalty is then ``LIGHTER_FEW_POINTS`` of itself, unless
-the scene is of the fewest points, under ``FEWEST_POINTS_PER_PIXEL`` lit voxels a window pixel (both the probe's:
-:func:`clsdcam.solve.auto_weights.lighter_few_points`; :meth:`Admm.point_like`). A scene of a few points that the
-probe's recount finds to be one of lit spots takes a point-like scene's penalties from there, its TV balanced again
-(:meth:`Admm.lit_spots`).
+few points to ``NONNEG_FEW_POINTS`` while the balance widens them further (:meth:`Admm.point_like`). A scene of a few
+points that the probe's recount finds to be one of lit spots takes a point-like scene's penalties from there, its TV
+balanced again (:meth:`Admm.lit_spots`). A scene of a few points in good light (the probe's noise σ̂ under
+``GOOD_LIGHT_BELOW`` of max|b|) that is not of the fewest, under ``FEWEST_POINTS_PER_PIXEL`` lit voxels a window pixel,
+is told point-like until the recount; found a few points there, it takes the few points' penalties, every one then
+``LIGHTER_FEW_POINTS`` of itself, its TV balanced again (both readings the probe's:
+:func:`clsdcam.solve.auto_weights.lighter_few_points`; :meth:`Admm.few_points_to_lighten`).
 
 ADMM's objective is not monotone: :attr:`Admm.monotone` is False, so the checkpoints keep the best iterate (Ctrl-C
 returns it) without rolling back on a rise. A video's next frame resumes from the last frame's splits and duals
@@ -51,15 +52,16 @@ NONNEG_POINT_LIKE = 3e-3
 # the sixteen-source scenes reach their answer in about half the iterations (docs/convergence.md, "Lighter penalties
 # for a few points")
 NONNEG_FEW_POINTS = 1e-3
-# and on a scene of a few points in good light, every penalty times LIGHTER_FEW_POINTS (μ₁ and μ₃ halved; the balance
-# then sets μ₂,d from the thresholds): the three standard-light sixteen-source scenes the 3000-iteration cap held
-# 0.4–1.0 dB short of their answer (112×144 to 160×192) come within it, a fresh 144×176 panel stops in 9 % fewer
-# iterations and the 96×112 tuning scenes in 15 % more, all within; in low light the same change cost iterations
-# (docs/convergence.md, "Halved penalties for a few points in good light"). Good light, and the fewest points, are the
-# probe's readings (clsdcam.solve.auto_weights.lighter_few_points, with their measured ranges). Not on the fewest, under
-# FEWEST_POINTS_PER_PIXEL lit voxels a window pixel: the simulator's two-point scenes, halved, needed a stop at 0.01 (at
-# 0.015 two of five ended 0.27–0.30 dB short of their answer); unhalved, nine of them stop 5 % sooner at 0.01, all
-# within (docs/convergence.md, "A wider stop for a few points in good light")
+# and on a scene of a few points in good light, from the recount that finds it one, every penalty times
+# LIGHTER_FEW_POINTS (μ₁ and μ₃ halved; the balance then sets μ₂,d from the thresholds): the three standard-light
+# sixteen-source scenes the 3000-iteration cap held 0.4–1.0 dB short of their answer (112×144 to 160×192) come within
+# it, a fresh 144×176 panel stops in 9 % fewer iterations and the 96×112 tuning scenes in 15 % more, all within; in low
+# light the same change cost iterations (docs/convergence.md, "Halved penalties for a few points in good light"). Good
+# light, and the fewest points, are the probe's readings (clsdcam.solve.auto_weights.lighter_few_points, with their
+# measured ranges). Not on the fewest, under FEWEST_POINTS_PER_PIXEL lit voxels a window pixel: the simulator's
+# two-point scenes, halved, needed a stop at 0.01 (at 0.015 two of five ended 0.27–0.30 dB short of their answer);
+# unhalved, nine of them stop 5 % sooner at 0.01, all within (docs/convergence.md, "A wider stop for a few points in
+# good light")
 LIGHTER_FEW_POINTS = 0.5
 # conjugate-gradient steps of the margin's correction in each c-step (0: none; margin.py, and docs/convergence.md,
 # "The margin's correction built"): 10 measured best of 0, 3 and 10
@@ -187,46 +189,57 @@ class Admm(Algorithm):
             return
         self.state, _ = self.splitting.start(point)
 
-    def point_like(self, few_points: bool = False, lighter: bool = False) -> str | None:
+    def point_like(self, few_points: bool = False) -> str | None:
         """The scene is point-like (the auto weights' probe, :mod:`clsdcam.solve.auto_weights`): μ₃ from ``NONNEG`` to
-        ``NONNEG_POINT_LIKE`` of the same scale, or ``NONNEG_FEW_POINTS`` on a scene of ``few_points``, and on one to
-        make ``lighter`` (in good light, not of the fewest: ``lighter_few_points``) every penalty then
-        LIGHTER_FEW_POINTS of itself, the solve going on from the same point (:func:`.balance.repenalise`); the TV
-        balance still to come sets wider thresholds, wider still on a scene of a few points, where it may also set lower
-        penalties (:mod:`.balance`). Returns the line that says so (None before the first iteration, when only the
-        balance is told)."""
+        ``NONNEG_POINT_LIKE`` of the same scale, or ``NONNEG_FEW_POINTS`` on a scene of ``few_points``, the solve going
+        on from the same point (:func:`.balance.repenalise`); the TV balance still to come sets wider thresholds, wider
+        still on a scene of a few points, where it may also set lower penalties (:mod:`.balance`). Returns the line that
+        says so (None before the first iteration, when only the balance is told)."""
         self._scene = "few_points" if few_points else "point_like"
         if self.state is None:
             return None
         from .balance import repenalise
 
         factor = (NONNEG_FEW_POINTS if few_points else NONNEG_POINT_LIKE) / NONNEG
-        old = self.splitting.penalties
-        new = replace(old, nonneg=old.nonneg * factor)
-        said = (f"admm: μ₃ × {factor:g}, wider TV thresholds (a scene of a few points)" if few_points
+        repenalise(self.splitting, self.state, self.backend,
+                   replace(self.splitting.penalties, nonneg=self.splitting.penalties.nonneg * factor))
+        return (f"admm: μ₃ × {factor:g}, wider TV thresholds (a scene of a few points)" if few_points
                 else f"admm: μ₃ × {factor:g}, wider TV thresholds (a point-like scene)")
-        if few_points and lighter:
-            new = new.scaled(LIGHTER_FEW_POINTS)
-            said += f"; every penalty × {LIGHTER_FEW_POINTS:g} (in good light, not of the fewest points)"
-        repenalise(self.splitting, self.state, self.backend, new)
-        return said
 
     def lit_spots(self) -> str | None:
         """The scene told to be of a few points is one of lit spots (the probe's recount): from here on the penalties
         of a point-like scene, the camera's (:func:`penalties_for`) with μ₃ at ``NONNEG_POINT_LIKE``, and the TV split
-        balanced again from the iterate with the spread scenes' C and floor (:func:`.balance.balance`), the duals
-        carried over (:func:`.balance.repenalise`). Returns the line that says so (None before the first
-        iteration)."""
-        self._scene = "spread"
+        balanced again from the iterate with the spread scenes' C and floor (:meth:`_retake`). Returns the line that
+        says so (None before the first iteration)."""
+        if self._retake("spread", NONNEG_POINT_LIKE):
+            return f"admm: μ₃ × {NONNEG_POINT_LIKE / NONNEG:g} of the camera's, TV balanced again (lit spots)"
+        return None
+
+    def few_points_to_lighten(self) -> str | None:
+        """The scene told point-like in good light is, counted again (the probe's recount), one of a few points not of
+        the fewest: from here on the camera's penalties with μ₃ at ``NONNEG_FEW_POINTS``, every one then
+        ``LIGHTER_FEW_POINTS`` of itself, and the TV split balanced again from the iterate with the few points' C and
+        floor (:meth:`_retake`). Returns the line that says so (None before the first iteration)."""
+        if self._retake("few_points", NONNEG_FEW_POINTS, LIGHTER_FEW_POINTS):
+            return (f"admm: μ₃ × {NONNEG_FEW_POINTS / NONNEG:g} of the camera's, every penalty × "
+                    f"{LIGHTER_FEW_POINTS:g}, wider TV thresholds (a few points in good light)")
+        return None
+
+    def _retake(self, scene: str, nonneg: float, scale: float = 1.0) -> bool:
+        """The camera's penalties (:func:`penalties_for`) with μ₃ at ``nonneg`` of μ₂'s scale, every one times
+        ``scale``, the duals carried over (:func:`.balance.repenalise`), then the TV balanced again from the iterate
+        with the ``scene``'s C and floor (:func:`.balance.balance`), which the balance reads from then on. False
+        before the first iteration (nothing to retake: only the scene is kept)."""
+        self._scene = scene
         if self.state is None:
-            return None
+            return False
         from .balance import balance, repenalise
 
         camera = penalties_for(self.splitting)
         repenalise(self.splitting, self.state, self.backend,
-                   replace(camera, nonneg=camera.nonneg * NONNEG_POINT_LIKE / NONNEG))
-        balance(self.splitting, self.state, self.backend)
-        return f"admm: μ₃ × {NONNEG_POINT_LIKE / NONNEG:g} of the camera's, TV balanced again (lit spots)"
+                   replace(camera, nonneg=camera.nonneg * nonneg / NONNEG).scaled(scale))
+        balance(self.splitting, self.state, self.backend, scene)
+        return True
 
     def carry(self):
         """What the next frame's solve resumes from: the splits and duals (None before the first iteration)."""
