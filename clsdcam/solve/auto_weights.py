@@ -17,9 +17,9 @@ blurrier. Below it, a rule with a ``point_noise`` lightens the weight in good li
 a dark iterate counts as p = 1.
 
 Below the threshold, too, the algorithm is told, and whether the scene is one of a few points, fewer than
-``FEW_POINTS_PER_PIXEL`` lit voxels a window pixel (below), and whether it is one to lighten (below):
-``Algorithm.point_like`` (ADMM lightens its non-negativity penalty, on a few points widens its TV thresholds, and on
-one to lighten lightens every penalty).
+``FEW_POINTS_PER_PIXEL`` lit voxels a window pixel (below), unless it is one to lighten, told point-like until the
+recount (below): ``Algorithm.point_like`` (ADMM lightens its non-negativity penalty, and on a few points widens its
+TV thresholds); one to lighten that the recount finds few is told then (``Algorithm.few_points_to_lighten``).
 At or above it, the automatic stop may widen its tolerance (``wide_stop``, ``--converge auto``): the scenes the
 probe passes reach the model's answer, within the rules of docs/convergence.md, at a distance of 0.1 where the
 point-like ones need 0.05 ("The stop widened where the scene is not point-like"). The same iterate's count of lit
@@ -102,7 +102,8 @@ from .noise import residual_noise
 
 AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
 # lit voxels (sum/peak) a window pixel below which a point-like scene is one of a few points: ADMM takes its penalties
-# for a few points (Algorithm.point_like's few_points) and --converge auto narrows to FEW_POINTS_STOP of itself. The
+# for a few points (Algorithm.point_like's few_points) and --converge auto narrows to FEW_POINTS_STOP of itself (a few
+# points to lighten: told point-like until RECOUNT_AT, then as its recount reads them). The
 # simulator's two-point scenes count 0.004–0.009 a pixel, its sixteen sources 0.015–0.030 (96×112 to 160×192, 32–48
 # bands), the narrow-line scenes of a 20-scene 128×160×64 panel 0.019–0.078 (docs/convergence.md, "A few points
 # counted per pixel")
@@ -137,11 +138,11 @@ SPARSE_LIGHT_BELOW = 0.008
 # forgot its windows at AUTO_AT and reads after FIRST_READING)
 RECOUNT_AT = AUTO_AT + FIRST_READING
 # lit voxels (sum/peak over the window) at RECOUNT_AT from which such a scene is one of lit spots, its stop back to
-# --converge: ADMM has gathered the simulator's sixteen sources into 17–35 and two points into 4–21 by then (120×152 to
-# 144×176), the narrow-line spots counted as a few points at AUTO_AT into 104–367 (128×160), a fresh panel's into
-# 88–314 (docs/convergence.md, "A few points counted again"); on the point-like road, where a few points to lighten
-# are told to go until then, the sixteen sources into 18–53 and those spots into 106–396 ("A few points in good light
-# told point-like until the recount")
+# --converge (a few points to lighten: kept where the probe put it): ADMM has gathered the simulator's sixteen sources
+# into 17–35 and two points into 4–21 by then (120×152 to 144×176), the narrow-line spots counted as a few points at
+# AUTO_AT into 104–367 (128×160), a fresh panel's into 88–314 (docs/convergence.md, "A few points counted again"); on
+# the point-like road, where a few points to lighten are told to go until then, the sixteen sources into 18–53 and those
+# spots into 106–396 ("A few points in good light told point-like until the recount")
 SPOTS_FROM = 64
 # lit voxels a window pixel under which a scene of a few points is of the fewest: the simulator's two-point scenes count
 # 0.003–0.009, its sixteen sources 0.0136–0.030 at every size measured (96×112 to 160×192)
@@ -188,7 +189,8 @@ def in_good_light(noise: float) -> bool:
 
 def lighter_few_points(noise: float, lit_per_pixel: float) -> bool:
     """A scene of a few points read in good light (:func:`in_good_light`) and not of the fewest (at least
-    FEWEST_POINTS_PER_PIXEL lit voxels a pixel): ADMM halves its penalties there, and the stop is wider."""
+    FEWEST_POINTS_PER_PIXEL lit voxels a pixel): told point-like until the recount; where that finds them few, ADMM
+    halves its penalties there, and the stop is wider than on other few points."""
     return in_good_light(noise) and lit_per_pixel >= FEWEST_POINTS_PER_PIXEL
 
 
