@@ -10,7 +10,8 @@ from clsdcam.solve import auto_weights
 from clsdcam.solve.auto_weights import (AUTO_AT, FEW_POINTS_PER_PIXEL, FEW_POINTS_STOP, FEWEST_POINTS_PER_PIXEL,
                                         GOOD_LIGHT_BELOW, LIGHTER_FEW_POINTS_STOP, POINTS_IN_GOOD_LIGHT_STOP,
                                         RECOUNT_AT, SPARSE_BELOW, SPARSE_LIGHT_BELOW, SPOTS_FROM, AutoWeights,
-                                        auto_tolerance, probe_reading, recount_reroutes, sparse_in_good_light)
+                                        auto_tolerance, probe_reading, probed_tolerance, recount_reroutes,
+                                        sparse_in_good_light)
 from clsdcam.backends.numpy import NumpyBackend
 from clsdcam.errors import InputError
 from clsdcam.sim import simulate
@@ -270,9 +271,9 @@ MANY = (32, 128, 128)     # 0.04 lit voxels a pixel: 655.36 of these, point-like
 @pytest.mark.parametrize("cube, tolerance, said, few_points", [
     (lit_voxels(656, MANY), CONVERGE * POINTS_IN_GOOD_LIGHT_STOP, "a point-like scene in good light: noise 0.003 < "
      "0.005", False),                                   # point-like, not a few points, in good light
-    (lit_voxels(655, MANY), CONVERGE * POINTS_IN_GOOD_LIGHT_STOP, "a point-like scene in good light: noise 0.003 < "
-     "0.005; few lit voxels, 655, 0.03998 a pixel < 0.04, not of the fewest, ≥ 0.012: counted again at 180",
-     False),                                            # a few points to lighten: point-like until the recount
+    (lit_voxels(655, MANY), CONVERGE * LIGHTER_FEW_POINTS_STOP, "a point-like scene of few lit voxels: 655, 0.03998 "
+     "a pixel < 0.04; in good light, noise 0.003 < 0.005, not of the fewest, ≥ 0.012: until the recount at 180",
+     False),                # a few points to lighten: told point-like until the recount, the narrower stop till then
     (lit_voxels(93, (32, 48, 48)), CONVERGE * POINTS_IN_GOOD_LIGHT_STOP, "a point-like scene in good light",
      False),                                                  # under 500 lit voxels, over 0.04 a pixel: not a few
     (lit_voxels(120), CONVERGE * FEW_POINTS_STOP, "a point-like scene of few lit voxels: 120, 0.007324 a pixel < 0.04",
@@ -283,11 +284,11 @@ MANY = (32, 128, 128)     # 0.04 lit voxels a pixel: 655.36 of these, point-like
 ])
 def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tolerance, said, few_points):
     """--converge auto from the probe's mean/peak p and lit voxels n = sum/peak: CONVERGE_WIDE at or above the
-    point-like threshold, CONVERGE·POINTS_IN_GOOD_LIGHT_STOP below it (the probe's σ̂ = 0.003 is good light; low
-    light: the next test), CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window
-    pixel (n/(H·W)), unless the scene is one to lighten (in the probe's good light, σ̂ = 0.003, and not of the
-    fewest, FEWEST_POINTS_PER_PIXEL lit voxels a pixel or more), told point-like until the recount; a note says so
-    where it moved. The algorithm hears whether a point-like scene is one of a few points (None: not told); what it
+    point-like threshold, CONVERGE·POINTS_IN_GOOD_LIGHT_STOP below it (the probe's σ̂ = 0.003 is good light; low light:
+    the next test), CONVERGE·FEW_POINTS_STOP below FEW_POINTS_PER_PIXEL lit voxels a window pixel (n/(H·W)),
+    CONVERGE·LIGHTER_FEW_POINTS_STOP where the scene is one to lighten (in the probe's good light, σ̂ = 0.003, and not
+    of the fewest, FEWEST_POINTS_PER_PIXEL lit voxels a pixel or more), told point-like until the recount; a note says
+    so where it moved. The algorithm hears whether a point-like scene is one of a few points (None: not told); what it
     says back is noted."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=CONVERGE_WIDE), Residual(sigma=0.003, cube=cube)
     weights.act(stand_in, stand_in)
@@ -357,8 +358,8 @@ def test_a_few_points_counted_again_as_lit_spots_tell_the_algorithm_and_take_bac
     """A scene read as a few points at AUTO_AT (120 lit voxels, low light) is counted again at RECOUNT_AT, and only
     then: SPOTS_FROM lit voxels or more are lit spots, said in a note, the algorithm told (``lit_spots``, its line
     rerouting the driver), and a stop --converge auto narrowed (``wide_stop`` set) back to the tolerance it had;
-    fewer change nothing. Without --converge auto the stop never moves, but the algorithm is told all the same. The
-    count is kept either way, and nothing more is due."""
+    fewer change nothing but a note. Without --converge auto the stop never moves, but the algorithm is told all the
+    same. The count is kept either way, and nothing more is due."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=wide_stop), Residual(cube=lit_voxels(120))
     weights.act(stand_in, stand_in)
     narrowed = CONVERGE * FEW_POINTS_STOP if wide_stop else CONVERGE
@@ -372,39 +373,58 @@ def test_a_few_points_counted_again_as_lit_spots_tell_the_algorithm_and_take_bac
     spots = lit >= SPOTS_FROM
     assert stand_in.rules.converge == pytest.approx(CONVERGE if spots else narrowed, rel=1e-12)
     assert stand_in.rerouted == (["stand-in: spots"] if spots else [])      # what the algorithm said
-    said = [line for line in stand_in.notes if "lit spots" in line]
+    said = [line for line in stand_in.notes if line.startswith("recount:") or "(lit spots)" in line]
     recounted = f"recount: lit spots, not a few points ({lit} lit voxels at iteration {RECOUNT_AT} ≥ {SPOTS_FROM})"
     stop = f"stop: --converge auto, {CONVERGE:g} (lit spots)"
-    assert said == ([recounted] + ([stop] if wide_stop else []) if spots else [])
+    few = f"recount: a few points ({lit} lit voxels at iteration {RECOUNT_AT} < {SPOTS_FROM})"
+    assert said == ([recounted] + ([stop] if wide_stop else []) if spots else [few])
     assert weights.due_in(0, 10_000) is None
 
 
 @pytest.mark.parametrize("wide_stop", [CONVERGE_WIDE, None])
 @pytest.mark.parametrize("lit", [SPOTS_FROM, SPOTS_FROM - 1])
-def test_a_few_points_to_lighten_counted_again_as_a_few_points_tell_the_algorithm_and_narrow_the_stop(lit, wide_stop):
+def test_a_few_points_to_lighten_counted_again_tell_the_algorithm_or_widen_the_stop(lit, wide_stop):
     """A scene read as a few points to lighten at AUTO_AT (655 lit voxels, 0.04 a pixel, in good light), told
-    point-like with the point-like scenes' stop in good light, is counted again at RECOUNT_AT: under SPOTS_FROM lit
-    voxels it is a few points, said in a note, the algorithm told (``few_points_to_lighten``, its line rerouting the
-    driver), and a stop --converge auto tuned (``wide_stop`` set) narrows to CONVERGE·LIGHTER_FEW_POINTS_STOP; at
-    SPOTS_FROM or more nothing changes. Without --converge auto the stop never moves, but the algorithm is told all
-    the same."""
+    point-like, its stop --converge auto (``wide_stop`` set) at CONVERGE·LIGHTER_FEW_POINTS_STOP, is counted again at
+    RECOUNT_AT, said in a note: under SPOTS_FROM lit voxels it is a few points, the algorithm told
+    (``few_points_to_lighten``, its line rerouting the driver), the stop kept; at SPOTS_FROM or more it is lit spots,
+    the algorithm keeps its road and the stop widens to CONVERGE·POINTS_IN_GOOD_LIGHT_STOP, said in a note. Until the
+    recount the stop is the narrower of the two: the estimate's first reading, at RECOUNT_AT, comes before the
+    recount acts. Without --converge auto the stop never moves, but the algorithm is told all the same."""
     weights, stand_in = hook(point_like_below=0.0025, wide_stop=wide_stop), Residual(0.003, lit_voxels(655, MANY))
     weights.act(stand_in, stand_in)
     assert stand_in.told_few_points is False and weights.due_in(AUTO_AT, RECOUNT_AT - AUTO_AT) == RECOUNT_AT - AUTO_AT
-    told = CONVERGE * POINTS_IN_GOOD_LIGHT_STOP if wide_stop else CONVERGE
-    assert stand_in.rules.converge == pytest.approx(told, rel=1e-12)
+    narrowed = CONVERGE * LIGHTER_FEW_POINTS_STOP if wide_stop else CONVERGE
+    assert stand_in.rules.converge == pytest.approx(narrowed, rel=1e-12)
     stand_in.cube, stand_in.iterations = lit_voxels(lit, MANY), RECOUNT_AT
     weights.act(stand_in, stand_in)
     assert weights.chosen["lit_voxels_recounted"] == pytest.approx(lit, rel=1e-12)
     few = lit < SPOTS_FROM
-    narrowed = CONVERGE * LIGHTER_FEW_POINTS_STOP if wide_stop else CONVERGE
-    assert stand_in.rules.converge == pytest.approx(narrowed if few else told, rel=1e-12)
+    widened = CONVERGE * POINTS_IN_GOOD_LIGHT_STOP if wide_stop else CONVERGE
+    assert stand_in.rules.converge == pytest.approx(narrowed if few else widened, rel=1e-12)
     assert stand_in.rerouted == (["stand-in: a few points to lighten"] if few else [])
-    said = [line for line in stand_in.notes if "recount" in line or "(a few points in good light)" in line]
-    recounted = f"recount: a few points ({lit} lit voxels at iteration {RECOUNT_AT} < {SPOTS_FROM})"
-    stop = f"stop: --converge auto, {narrowed:.2g} (a few points in good light)"
-    assert said == ([recounted] + ([stop] if wide_stop else []) if few else [])
+    said = [line for line in stand_in.notes if line.startswith("recount:") or "(lit spots)" in line]
+    recounted = (f"recount: a few points ({lit} lit voxels at iteration {RECOUNT_AT} < {SPOTS_FROM})" if few else
+                 f"recount: lit spots, not a few points ({lit} lit voxels at iteration {RECOUNT_AT} ≥ {SPOTS_FROM})")
+    stop = f"stop: --converge auto, {widened:g} (lit spots)"
+    assert said == [recounted] + ([stop] if wide_stop and not few else [])
     assert weights.due_in(0, 10_000) is None
+
+
+@pytest.mark.parametrize("recounted, lit, good_light, share", [
+    (False, SPOTS_FROM, True, LIGHTER_FEW_POINTS_STOP),             # to lighten, until the recount: the narrower
+    (True, SPOTS_FROM - 1, True, LIGHTER_FEW_POINTS_STOP),          # recounted a few points
+    (True, SPOTS_FROM, True, POINTS_IN_GOOD_LIGHT_STOP),            # recounted lit spots: point-like in good light
+    (False, SPOTS_FROM, False, FEW_POINTS_STOP),                    # a few points in low light
+    (True, SPOTS_FROM, False, 1.0),                                 # recounted lit spots: the untuned stop
+])
+def test_probed_tolerance_reads_the_probe_and_the_recount(recounted, lit, good_light, share):
+    """The tolerance the tools replay, from a solve's attributes, is the one the hook sets before (``recounted``
+    False) and after the recount (the tests above: the same shares)."""
+    attrs = {"mean_over_peak": 0.001, "noise_estimate": 0.003 if good_light else 0.01, "lit_per_pixel": 0.02,
+             "lit_voxels_recounted": lit}
+    tolerance = probed_tolerance(attrs, 0.0025, CONVERGE, CONVERGE_WIDE, recounted)
+    assert tolerance == pytest.approx(CONVERGE * share, rel=1e-12)
 
 
 @pytest.mark.parametrize("point_like, lighter, spots, rerouted", [

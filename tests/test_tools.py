@@ -366,8 +366,8 @@ def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_
     AUTO_AT iterations, as the default's does on a point-like scene, and told a few points to NONNEG_FEW_POINTS/NONNEG,
     its TV balance at that iteration taking the point-like scenes' wider thresholds, or the few points' wider still;
     told a few points in good light and not of the fewest (``lighter``), it takes the point-like scene's penalties, and
-    after RECOUNT_AT iterations the few points' with μ₁ and μ₃ LIGHTER_FEW_POINTS of those, the TV balanced again
-    with the few points' C (``Admm.few_points_to_lighten``), unless told lit spots as well; told lit spots on a few
+    where told the recount ``rerouted``, after RECOUNT_AT iterations the few points' with μ₁ and μ₃ LIGHTER_FEW_POINTS
+    of those, the TV balanced again with the few points' C (``Admm.few_points_to_lighten``); told a rerouted few
     points, after RECOUNT_AT iterations μ₃ is NONNEG_POINT_LIKE of μ₂'s scale (``Admm.lit_spots``); not told, or
     before that iteration, or after the context, it keeps its penalties."""
     from clsdcam.algorithms.admm import algorithm, balance
@@ -396,16 +396,16 @@ def test_told_point_like_gives_admm_the_probes_penalties_before_the_balance_and_
     assert penalties(AUTO_AT + 2, **lighter) == point_like                  # told point-like until the recount
     scenes, real = [], balance.balance
     monkeypatch.setattr(balance, "balance", lambda *a: scenes.append(a[3:]) or real(*a))
-    bright = penalties(RECOUNT_AT + 1, **lighter)                           # a few points then, lightened
+    bright = penalties(RECOUNT_AT + 1, **lighter, rerouted=True)            # a few points then, lightened
     assert scenes == [("point_like",), ("few_points",)]                     # balanced again with C = 16
     assert bright.data == pytest.approx(kept.data * algorithm.LIGHTER_FEW_POINTS, rel=1e-12)
     assert bright.nonneg == pytest.approx(few.nonneg * algorithm.LIGHTER_FEW_POINTS, rel=1e-12)
-    assert penalties(RECOUNT_AT + 1, **lighter, spots=True) == penalties(RECOUNT_AT + 1, point_like=True)
-    spots = penalties(RECOUNT_AT + 1, point_like=True, few_points=True, spots=True)
+    assert penalties(RECOUNT_AT + 1, **lighter) == penalties(RECOUNT_AT + 1, point_like=True)     # lit spots
+    spots = penalties(RECOUNT_AT + 1, point_like=True, few_points=True, rerouted=True)
     assert spots.nonneg / spots.tv == pytest.approx(algorithm.NONNEG_POINT_LIKE / algorithm.TV, rel=1e-12)
     assert spots.data == pytest.approx(kept.data, rel=1e-12)           # the camera's
     assert spots.tv_balance is not None and spots.tv_balance != few.tv_balance      # balanced again, C = 2
-    assert penalties(RECOUNT_AT, point_like=True, few_points=True, spots=True) == penalties(RECOUNT_AT, **few_told)
+    assert penalties(RECOUNT_AT, point_like=True, few_points=True, rerouted=True) == penalties(RECOUNT_AT, **few_told)
     assert Admm.iterate is plain
 
 
@@ -710,6 +710,9 @@ def test_bench_answer_replays_the_default_stop_where_the_default_stops(tmp_path,
     capped = bench_answer.stop(late, {"psnr": 9.0, "angle": 1.0}, 0.2)      # a reading past the cap is not read
     assert (capped["iteration"], capped["converged"]) == (830, False)
     assert bench_answer.stop_cell(capped) == "830 (cap): +0.00 dB / +0.00°"
+    at_recount = [{"iteration": k, "psnr": 9.0, "angle": 1.0, "estimate": 0.05} for k in (RECOUNT_AT, RECOUNT_AT + 25)]
+    recounted = bench_answer.stop(at_recount, {"psnr": 9.0, "angle": 1.0}, 0.02, 0.07)   # RECOUNT_AT's mark: 0.02
+    assert (recounted["iteration"], recounted["tolerance"], recounted["converged"]) == (RECOUNT_AT + 25, 0.07, True)
     assert "| 1 | sources, standard |" in capsys.readouterr().out and (tmp_path / "answer.png").stat().st_size > 0
     with pytest.raises(SystemExit) as refused:
         bench_answer.main([*args[:-5], "1000", "--out", str(tmp_path / "short")])

@@ -12,8 +12,8 @@ and mean spectral angle, and how far they moved over the last 1000 iterations (a
 estimate (:class:`clsdcam.solve.convergence.DistanceEstimate`, started afresh at AUTO_AT as the default's is, and
 at RECOUNT_AT where its recount changed the road) is replayed on the run, at most AUTO_CAP iterations:
 
-* at the tolerance ``--converge auto`` takes from the run's probe (:func:`clsdcam.solve.auto_weights.auto_tolerance`):
-  where the default stops;
+* at the tolerances ``--converge auto`` takes from the run's probe and, after RECOUNT_AT, its recount
+  (:func:`clsdcam.solve.auto_weights.probed_tolerance`): where the default stops;
 * at each of ``--tolerances``;
 * "needs": the widest tolerance of the grid 0.05·2^(−k/8) whose stop is within.
 
@@ -31,8 +31,7 @@ from bench_converged import curve, timed_solve, within
 from bench_panel import add_kinds_option, chosen_scenes, panel_scene, scene_done, scene_indices
 from bench_stop import replay, save_grid, scene_grid
 from clsdcam.algorithms.admm.algorithm import POINT_LIKE_BELOW
-from clsdcam.solve.auto_weights import (AUTO_AT, RECOUNT_AT, auto_tolerance, in_good_light, probe_reading,
-                                        recount_reading, recount_reroutes, sparse_in_good_light)
+from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, probe_reading, probed_tolerance, recount_reroutes
 from clsdcam.solve.convergence import WINDOW
 from clsdcam.solve.settings import AUTO_CAP, CONVERGE, CONVERGE_WIDE
 
@@ -56,12 +55,16 @@ def default_run(sim, iters: int) -> tuple[dict, list[dict]]:
     return result.attrs, points
 
 
-def stop(points: list[dict], answer: dict, tolerance: float) -> dict:
+def stop(points: list[dict], answer: dict, tolerance: float, recounted: float | None = None) -> dict:
     """Where the replayed stop at ``tolerance`` ends (its first mark below it, else the cap's), how far short of
-    ``answer`` it is there, and whether that is within."""
+    ``answer`` it is there, and whether that is within; marks after RECOUNT_AT read ``recounted`` where it is given
+    (the default's stop reads its mark at RECOUNT_AT before the recount acts)."""
+    def reading(point: dict) -> float:
+        return tolerance if recounted is None or point["iteration"] <= RECOUNT_AT else recounted
+
     capped = [p for p in points if p["iteration"] <= AUTO_CAP]
-    end = next((p for p in capped if p["estimate"] < tolerance), capped[-1])
-    return {"tolerance": tolerance, "iteration": end["iteration"], "converged": end["estimate"] < tolerance,
+    end = next((p for p in capped if p["estimate"] < reading(p)), capped[-1])
+    return {"tolerance": reading(end), "iteration": end["iteration"], "converged": end["estimate"] < reading(end),
             "short_db": answer["psnr"] - end["psnr"], "over_deg": end["angle"] - answer["angle"],
             "within": within(end, answer)}
 
@@ -71,16 +74,13 @@ def run_scene(plan: dict, args) -> dict:
     attrs, points = default_run(sim, args.iters)
     answer, before = points[-1], next(p for p in points if p["iteration"] >= points[-1]["iteration"] - SETTLED_OVER)
     point_like, few_points, lighter = probe_reading(attrs, POINT_LIKE_BELOW)
-    spots = recount_reading(attrs)
-    default = (CONVERGE if spots and not lighter
-               else auto_tolerance(CONVERGE, CONVERGE_WIDE, point_like, few_points and not spots, lighter,
-                                   sparse_in_good_light(attrs), in_good_light(attrs["noise_estimate"])))
+    default = [probed_tolerance(attrs, POINT_LIKE_BELOW, CONVERGE, CONVERGE_WIDE, recounted) for recounted in (0, 1)]
     return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
             "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
             "lighter": lighter, "noise": attrs["noise_estimate"],
             "answer": {"psnr": answer["psnr"], "angle": answer["angle"], "drift_db": answer["psnr"] - before["psnr"],
                        "drift_deg": answer["angle"] - before["angle"]},
-            "default": stop(points, answer, default), "stops": [stop(points, answer, t) for t in args.tolerances],
+            "default": stop(points, answer, *default), "stops": [stop(points, answer, t) for t in args.tolerances],
             "needs": next((s for s in (stop(points, answer, t) for t in GRID) if s["within"]), None),
             "marks": points}
 

@@ -70,7 +70,7 @@ from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
-from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, probe_reading, recount_reading
+from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, probe_reading, recount_reroutes
 from clsdcam.solve.convergence import DistanceEstimate
 from clsdcam.solve.solver import Settings
 
@@ -125,19 +125,22 @@ def scene_weight(sim, weight_from: str) -> tuple[float, dict]:
     weight_run, _ = timed_solve(sim, TODAY if weight_from == "today" else {})
     point_like, few_points, lighter = probe_reading(weight_run.attrs, POINT_LIKE_BELOW)
     return float(weight_run.attrs["tv_chosen"]), {"point_like": point_like, "few_points": few_points,
-                                                  "lighter": lighter, "spots": recount_reading(weight_run.attrs)}
+                                                  "lighter": lighter,
+                                                  "rerouted": recount_reroutes(weight_run.attrs, POINT_LIKE_BELOW)}
 
 
 @contextmanager
-def told_point_like(point_like: bool = False, few_points: bool = False, lighter: bool = False, spots: bool = False):
-    """While it lasts, where ``point_like``, every ADMM solve is told so before its iteration AUTO_AT + 1 (and
-    whether the scene is ``few_points``, unless it is one to make ``lighter``), as the default's probe tells it
-    (``Admm.point_like``), and before its iteration RECOUNT_AT + 1 what the recount found: a few points recounted as
-    lit ``spots`` (``Admm.lit_spots``), or a few points to make lighter recounted as such (not ``spots``:
-    ``Admm.few_points_to_lighten``). A run at a given weight reads no probe, so without this it would keep the
-    penalties of the spread scenes where the default's change. (A stop replayed on such a run forgets its windows at
-    AUTO_AT alone, :func:`replay_stop`, where the default's also does at the recount.) Only for solves at a given
-    weight: a solve with ``--tv auto`` reads its own probe and would be told twice."""
+def told_point_like(point_like: bool = False, few_points: bool = False, lighter: bool = False,
+                    rerouted: bool = False):
+    """While it lasts, where ``point_like``, every ADMM solve is told so before its iteration AUTO_AT + 1 (and whether
+    the scene is ``few_points``, unless it is one to make ``lighter``), as the default's probe tells it
+    (``Admm.point_like``), and before its iteration RECOUNT_AT + 1, where the default's recount ``rerouted``
+    (:func:`clsdcam.solve.auto_weights.recount_reroutes`), what it found: lit spots on a few points
+    (``Admm.lit_spots``), or a few points on a few points to make lighter (``Admm.few_points_to_lighten``). A run at a
+    given weight reads no probe, so without this it would keep the penalties of the spread scenes where the default's
+    change. (A stop replayed on such a run forgets its windows at AUTO_AT alone, :func:`replay_stop`, where the
+    default's also does at the recount.) Only for solves at a given weight: a solve with ``--tv auto`` reads its own
+    probe and would be told twice."""
     from clsdcam.algorithms.admm.algorithm import Admm
 
     plain = Admm.iterate
@@ -145,7 +148,7 @@ def told_point_like(point_like: bool = False, few_points: bool = False, lighter:
     def iterate(algorithm, problem):
         if algorithm._iterations == AUTO_AT:
             algorithm.point_like(few_points and not lighter)
-        if algorithm._iterations == RECOUNT_AT and few_points and spots != lighter:
+        if algorithm._iterations == RECOUNT_AT and rerouted:
             algorithm.few_points_to_lighten() if lighter else algorithm.lit_spots()
         return plain(algorithm, problem)
 

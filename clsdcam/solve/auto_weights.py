@@ -38,9 +38,11 @@ a fresh sixteen-source scene of 402 lit voxels 1.14 dB short of its answer.
 The probe's noise σ̂ and count read a third thing: a scene of a few points in good light (σ̂ under
 ``GOOD_LIGHT_BELOW`` of max|b|) that is not of the fewest (at least ``FEWEST_POINTS_PER_PIXEL`` lit voxels a window
 pixel), the sixteen sources rather than two points, but also the narrow-line spots of half the simulator's lines
-scenes in standard light. Such a scene is told point-like, and stops as one in good light (below), until the recount
-(below) finds it a few points: then ADMM takes the few points' penalties, every one halved, and the stop narrows to
-``LIGHTER_FEW_POINTS_STOP``·0.05 = 0.02: so halved, the sixteen-source scenes need 0.02–0.05, where the two-point
+scenes in standard light. Such a scene is told point-like until the recount (below); where that finds it a few
+points, ADMM takes the few points' penalties, every one halved, and the stop is ``LIGHTER_FEW_POINTS_STOP``·0.05 =
+0.02, where it finds lit spots, the point-like scenes' stop in good light (below). Until the recount the stop is
+0.02, the narrower of the two: the estimate's first reading comes at the recount's iteration, before the recount acts.
+So halved, the sixteen-source scenes need 0.02–0.05, where the two-point
 scenes, halved, needed 0.01, and one in low light ended 0.25 dB short at 0.02 ("A wider stop for a few points in good
 light"). Told a few points from AUTO_AT instead, the lines scenes read so took 1.8 times the iterations on a fresh
 panel, the recount then putting them on the point-like road from a worse start, and the sixteen sources, at the cap
@@ -52,20 +54,22 @@ A point-like scene that is not a few points, read in good light (σ̂ under ``GO
 
 the simulator's narrow-line scenes in standard light, whose answers are the sharpest of every panel, came within the
 rules on ADMM's road with at least 0.16 dB and 0.20° to spare there, where 0.1 left 0.02 dB on one of eleven and, on a
-fresh scene, stopped 0.08 dB outside (docs/convergence.md, "A wider stop for point-like scenes in good light"). In low
-light, and on a few points not to lighten recounted as lit spots, the stop stays at 0.05.
+fresh scene, stopped 0.08 dB outside (docs/convergence.md, "A wider stop for point-like scenes in good light"). So do
+a few points to lighten recounted as lit spots, from the recount on. In low light, and on other few points recounted
+as lit spots, the stop stays at 0.05.
 
-A scene counted as a few points is counted again at ``RECOUNT_AT``, the first iteration the stop can fire (the attribute
-``lit_voxels_recounted``). By then ADMM has gathered each point into a few voxels: on the few points' road the
-simulator's sixteen sources count 17–35 and two points 4–21 (120×152 to 144×176), where the narrow-line spots of its
-lines scenes, which at AUTO_AT count as few as sixteen sources do, still count 88–367 (128×160); on the point-like road,
-where a few points to lighten go, the sixteen sources count 18–53 (96×112 to 160×192) and the lines scenes 106–396
-(96×112 and 128×160). From ``SPOTS_FROM`` lit voxels the scene is one of lit spots: one told a few points takes the
-algorithm's setting for a point-like scene instead (``Algorithm.lit_spots``; ADMM its point-like penalties, the TV
-balanced again), and its stop goes back to the tolerance it narrowed; under it, one told point-like takes the setting
-for a few points to lighten (``Algorithm.few_points_to_lighten``) and the stop narrows. Either way the estimate forgets
-its windows where that changed the iteration. Counted in voxels, not per pixel: gathered, a point lights a few voxels
-whatever the sensor, where the spots grow with the field (docs/convergence.md, "A few points counted again").
+A scene counted as a few points is counted again at ``RECOUNT_AT``, the first iteration the stop can fire, whose reading
+comes before the recount acts (the attribute ``lit_voxels_recounted``). By then ADMM has gathered each point into a few
+voxels: on the few points' road the simulator's sixteen sources count 17–35 and two points 4–21 (120×152 to 144×176),
+where the narrow-line spots of its lines scenes, which at AUTO_AT count as few as sixteen sources do, still count 88–367
+(128×160); on the point-like road, where a few points to lighten go, the sixteen sources count 18–53 (96×112 to 160×192)
+and the lines scenes 106–396 (96×112 and 128×160). From ``SPOTS_FROM`` lit voxels the scene is one of lit spots: one
+told a few points takes the algorithm's setting for a point-like scene instead (``Algorithm.lit_spots``; ADMM its
+point-like penalties, the TV balanced again), and its stop goes back to the tolerance it narrowed, and one to lighten,
+told point-like, widens its stop to 0.07; under it, one told point-like takes the setting for a few points to lighten
+(``Algorithm.few_points_to_lighten``) and keeps the stop at 0.02. The estimate forgets its windows where that changed
+the iteration. Counted in voxels, not per pixel: gathered, a point lights a few voxels whatever the sensor, where the
+spots grow with the field (docs/convergence.md, "A few points counted again").
 
 A scene that is not point-like but sparse in good light, p under ``SPARSE_BELOW`` and σ̂ under ``SPARSE_LIGHT_BELOW``
 (the simulator's sparse scenes of a few sources on a dim background, in its standard light), keeps the narrow
@@ -103,10 +107,10 @@ from .noise import residual_noise
 AUTO_AT = 30               # auto weights are chosen from the noise of this iteration's residual
 # lit voxels (sum/peak) a window pixel below which a point-like scene is one of a few points: ADMM takes its penalties
 # for a few points (Algorithm.point_like's few_points) and --converge auto narrows to FEW_POINTS_STOP of itself (a few
-# points to lighten: told point-like until RECOUNT_AT, then as its recount reads them). The
-# simulator's two-point scenes count 0.004–0.009 a pixel, its sixteen sources 0.015–0.030 (96×112 to 160×192, 32–48
-# bands), the narrow-line scenes of a 20-scene 128×160×64 panel 0.019–0.078 (docs/convergence.md, "A few points
-# counted per pixel")
+# points to lighten: told point-like until RECOUNT_AT, then as its recount reads them, the stop LIGHTER_FEW_POINTS_STOP
+# of it until then). The simulator's two-point scenes count 0.004–0.009 a pixel, its sixteen sources 0.015–0.030
+# (96×112 to 160×192, 32–48 bands), the narrow-line scenes of a 20-scene 128×160×64 panel 0.019–0.078
+# (docs/convergence.md, "A few points counted per pixel")
 FEW_POINTS_PER_PIXEL = 0.04
 # --converge auto on a scene of a few points, as a share of --converge: the simulator's few-point scenes need 0.023–0.05
 # with ADMM's penalties for them; 0.01 keeps twice the margin over the narrowest (docs/convergence.md, "Lighter
@@ -138,11 +142,11 @@ SPARSE_LIGHT_BELOW = 0.008
 # forgot its windows at AUTO_AT and reads after FIRST_READING)
 RECOUNT_AT = AUTO_AT + FIRST_READING
 # lit voxels (sum/peak over the window) at RECOUNT_AT from which such a scene is one of lit spots, its stop back to
-# --converge (a few points to lighten: kept where the probe put it): ADMM has gathered the simulator's sixteen sources
-# into 17–35 and two points into 4–21 by then (120×152 to 144×176), the narrow-line spots counted as a few points at
-# AUTO_AT into 104–367 (128×160), a fresh panel's into 88–314 (docs/convergence.md, "A few points counted again"); on
-# the point-like road, where a few points to lighten are told to go until then, the sixteen sources into 18–53 and those
-# spots into 106–396 ("A few points in good light told point-like until the recount")
+# --converge (a few points to lighten: to the point-like scenes' stop in good light): ADMM has gathered the simulator's
+# sixteen sources into 17–35 and two points into 4–21 by then (120×152 to 144×176), the narrow-line spots counted as a
+# few points at AUTO_AT into 104–367 (128×160), a fresh panel's into 88–314 (docs/convergence.md, "A few points counted
+# again"); on the point-like road, where a few points to lighten are told to go until then, the sixteen sources into
+# 18–53 and those spots into 106–396 ("A few points in good light told point-like until the recount")
 SPOTS_FROM = 64
 # lit voxels a window pixel under which a scene of a few points is of the fewest: the simulator's two-point scenes count
 # 0.003–0.009, its sixteen sources 0.0136–0.030 at every size measured (96×112 to 160×192)
@@ -215,6 +219,21 @@ def auto_tolerance(converge: float, wide: float, point_like: bool, few_points: b
     return converge * POINTS_IN_GOOD_LIGHT_STOP if good_light else converge
 
 
+def probed_tolerance(attrs: dict, point_like_below: float, converge: float, wide: float,
+                     recounted: bool = False) -> float:
+    """``--converge auto``'s tolerance (:func:`auto_tolerance`) from the probe's attributes of a solve or its result
+    (:func:`probe_reading`, :func:`sparse_in_good_light`, ``noise_estimate``), ``converge`` untuned; where
+    ``recounted`` (after RECOUNT_AT), lit spots found on a few points stop as a point-like scene that is not a few
+    points, in good light on those to lighten (where the wider stop was judged), at ``converge`` on the others. Until
+    the recount a few points to lighten take the narrower of their two stops, LIGHTER_FEW_POINTS_STOP·``converge``:
+    the stop's first reading comes at the recount's iteration, before it acts."""
+    point_like, few_points, lighter = probe_reading(attrs, point_like_below)
+    spots = recounted and recount_reading(attrs)
+    good_light = lighter if spots else in_good_light(attrs["noise_estimate"])
+    return auto_tolerance(converge, wide, point_like, few_points and not spots, lighter, sparse_in_good_light(attrs),
+                          good_light)
+
+
 def measured_mean(problem) -> float:
     """q = mean(b)/max|b| of the problem's measurement (it holds b/max|b|): the light's spread over the sensor, which
     sets how much of σ̂ (of the peak) is shot noise (:meth:`clsdcam.solve.priors.AutoWeight.for_noise`)."""
@@ -242,7 +261,6 @@ class AutoWeights:
         self.wide_stop = wide_stop                    # the stop's tolerance where p passes (None: it stays)
         self.chosen: dict = {}          # what was chosen, for the result's attributes
         self._recount_due = False       # a few points read at AUTO_AT, not yet counted again
-        self._to_lighten = False        # and told point-like until then: a few points in good light, not the fewest
         self._untuned: float | None = None   # the stop's tolerance before the probe tuned it (None: not tuned)
 
     def due_in(self, done: int, iters: int) -> int | None:
@@ -280,74 +298,57 @@ class AutoWeights:
         driver.rescore(problem.objective)
         if point_like:
             driver.note(driver.algorithm.point_like(few_points and not lighter))
-        self._recount_due, self._to_lighten = few_points, lighter
+        self._recount_due = few_points
         if self.wide_stop and "mean_over_peak" in self.chosen:
             self._tune_stop(driver, point_like, few_points, lighter)
 
     def _tune_stop(self, driver, point_like: bool, few_points: bool, lighter: bool) -> None:
-        """``--converge auto`` from the probe's reading (:func:`probe_reading`, the module docstring): widened on a
-        scene that is not point-like unless it is sparse in good light, less on a point-like one in good light (a few
-        points to lighten among them, until the recount), narrowed on a scene of a few points; said in a note."""
+        """``--converge auto`` from the probe's reading (:func:`probed_tolerance`, the module docstring): widened on a
+        scene that is not point-like unless it is sparse in good light, less on a point-like one in good light,
+        narrowed on a scene of a few points (a few points to lighten until the recount); said in a note."""
         p, n, per_pixel = (self.chosen[name] for name in ("mean_over_peak", "lit_voxels", "lit_per_pixel"))
         noise = self.chosen["noise_estimate"]
-        sparse = not point_like and sparse_in_good_light(self.chosen)
-        good_light = in_good_light(noise)
         self._untuned = driver.rules.converge
-        tolerance = auto_tolerance(driver.rules.converge, self.wide_stop, point_like, few_points and not lighter,
-                                   sparse=sparse, good_light=good_light)
-        if sparse:
+        tolerance = probed_tolerance(self.chosen, self.point_like_below, self._untuned, self.wide_stop)
+        if not point_like and sparse_in_good_light(self.chosen):
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (a sparse scene in good light: mean/peak "
                         f"{p:.2g} < {SPARSE_BELOW:g}, noise {noise:.2g} < {SPARSE_LIGHT_BELOW:g})")
         elif not point_like:
             driver.widen_stop(tolerance)
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (not a point-like scene: mean/peak "
                         f"{p:.2g} ≥ {self.point_like_below:g})")
-        elif few_points and not lighter:
+        elif few_points:
             driver.narrow_stop(tolerance)
+            lighten = (f"; in good light, noise {noise:.2g} < {GOOD_LIGHT_BELOW:g}, not of the fewest, ≥ "
+                       f"{FEWEST_POINTS_PER_PIXEL:g}: until the recount at {RECOUNT_AT}") if lighter else ""
             driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a point-like scene of few lit voxels: "
-                        f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g})")
-        elif good_light:
+                        f"{n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g}{lighten})")
+        elif in_good_light(noise):
             driver.widen_stop(tolerance)
-            few = (f"; few lit voxels, {n:.3g}, {per_pixel:.4g} a pixel < {FEW_POINTS_PER_PIXEL:g}, not of the fewest, "
-                   f"≥ {FEWEST_POINTS_PER_PIXEL:g}: counted again at {RECOUNT_AT}") if lighter else ""
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (a point-like scene in good light: noise "
-                        f"{noise:.2g} < {GOOD_LIGHT_BELOW:g}{few})")
+                        f"{noise:.2g} < {GOOD_LIGHT_BELOW:g})")
 
     def recount(self, problem, driver) -> None:
         """At RECOUNT_AT on a scene the probe read as a few points: its lit voxels n counted again (the attribute
-        ``lit_voxels_recounted``; the module docstring). A scene told point-like as a few points to lighten is one of a
-        few points under SPOTS_FROM (:meth:`_few_points_to_lighten`); any other is one of lit spots from SPOTS_FROM
-        (:meth:`_lit_spots`)."""
+        ``lit_voxels_recounted``; the module docstring), said in a note. Where that changed its road
+        (:func:`recount_reroutes`) the algorithm is told: ``Algorithm.few_points_to_lighten`` on a few points to
+        lighten found few, ``Algorithm.lit_spots`` on other few points found to be lit spots (the estimate forgets its
+        windows where that changed the iteration). A stop the probe tuned takes the recounted tolerance
+        (:func:`probed_tolerance`): wider where lit spots were found."""
         self._recount_due = False
         p, voxels, _ = window_reading(problem, driver.x)
         n = self.chosen["lit_voxels_recounted"] = p * voxels
         spots = recount_reading(self.chosen)
-        if self._to_lighten and not spots:
-            self._few_points_to_lighten(driver, n)
-        elif spots and not self._to_lighten:
-            self._lit_spots(driver, n)
-
-    def _lit_spots(self, driver, n: float) -> None:
-        """A few points found to be lit spots, said in a note: the algorithm takes its setting for a point-like scene
-        (``Algorithm.lit_spots``; the estimate forgets its windows where that changed the iteration), and a stop the
-        probe narrowed goes back to the tolerance it had."""
         driver.note(f"recount: lit spots, not a few points ({n:.0f} lit voxels at iteration {driver.iterations} ≥ "
-                    f"{SPOTS_FROM})")
-        driver.reroute(driver.algorithm.lit_spots())
-        if self._untuned is not None:
-            driver.widen_stop(self._untuned)
+                    f"{SPOTS_FROM})" if spots else
+                    f"recount: a few points ({n:.0f} lit voxels at iteration {driver.iterations} < {SPOTS_FROM})")
+        if recount_reroutes(self.chosen, self.point_like_below):
+            lighter = probe_reading(self.chosen, self.point_like_below)[2]
+            driver.reroute(driver.algorithm.few_points_to_lighten() if lighter else driver.algorithm.lit_spots())
+        if self._untuned is not None and spots:
+            driver.widen_stop(probed_tolerance(self.chosen, self.point_like_below, self._untuned, self.wide_stop,
+                                               recounted=True))
             driver.note(f"stop: --converge auto, {driver.rules.converge:g} (lit spots)")
-
-    def _few_points_to_lighten(self, driver, n: float) -> None:
-        """A scene told point-like as a few points to lighten found to be a few points, said in a note: the algorithm
-        takes its setting for them (``Algorithm.few_points_to_lighten``; the estimate forgets its windows where that
-        changed the iteration), and a stop the probe tuned narrows to LIGHTER_FEW_POINTS_STOP of the tolerance it
-        had."""
-        driver.note(f"recount: a few points ({n:.0f} lit voxels at iteration {driver.iterations} < {SPOTS_FROM})")
-        driver.reroute(driver.algorithm.few_points_to_lighten())
-        if self._untuned is not None:
-            driver.narrow_stop(self._untuned * LIGHTER_FEW_POINTS_STOP)
-            driver.note(f"stop: --converge auto, {driver.rules.converge:.2g} (a few points in good light)")
 
     def _measure_likeness(self, problem, x) -> None:
         """The iterate's window's p = mean/max, kept as the attribute ``mean_over_peak``, n = p times the window's

@@ -56,7 +56,8 @@ NONNEG_FEW_POINTS = 1e-3
 # LIGHTER_FEW_POINTS (μ₁ and μ₃ halved; the balance then sets μ₂,d from the thresholds): the three standard-light
 # sixteen-source scenes the 3000-iteration cap held 0.4–1.0 dB short of their answer (112×144 to 160×192) come within
 # it, a fresh 144×176 panel stops in 9 % fewer iterations and the 96×112 tuning scenes in 15 % more, all within; in low
-# light the same change cost iterations (docs/convergence.md, "Halved penalties for a few points in good light"). Good
+# light the same change cost iterations (docs/convergence.md, "Halved penalties for a few points in good light"; all
+# measured halved from AUTO_AT, before such scenes were told point-like until the recount). Good
 # light, and the fewest points, are the probe's readings (clsdcam.solve.auto_weights.lighter_few_points, with their
 # measured ranges). Not on the fewest, under FEWEST_POINTS_PER_PIXEL lit voxels a window pixel: the simulator's
 # two-point scenes, halved, needed a stop at 0.01 (at 0.015 two of five ended 0.27–0.30 dB short of their answer);
