@@ -195,9 +195,10 @@ def add_solver_options(p: argparse.ArgumentParser):
                         f"D; auto (the default): {CONVERGE:g}, or {CONVERGE_WIDE:g} once iteration {AUTO_AT} shows a "
                         f"scene that is not point-like (unless sparse in good light), "
                         f"{CONVERGE * POINTS_IN_GOOD_LIGHT_STOP:g} on a point-like one in good light, or less on one "
-                        f"of few lit voxels as a recount at iteration {RECOUNT_AT} reads them (in good light, once it "
-                        f"finds them few; {CONVERGE:g} again where it finds lit spots); {CONVERGE:g} where that probe "
-                        f"does not run (FISTA, a weight given; docs/convergence.md)")
+                        f"of few lit voxels until a recount at iteration {RECOUNT_AT}, which widens it where it finds "
+                        f"lit spots ({CONVERGE:g}; {CONVERGE * POINTS_IN_GOOD_LIGHT_STOP:g} in good light, if not of "
+                        f"the fewest); "
+                        f"{CONVERGE:g} where that probe does not run (FISTA, a weight given; docs/convergence.md)")
     p.add_argument("--algorithm", default="auto", choices=("auto",) + tuple(ALGORITHMS),
                    help="the algorithm the solve runs: fista (FISTA with adaptive restart), admm (ADMM with "
                         "closed-form steps: fewer iterations, band space only, --tv and --l1 only), or auto (the "
