@@ -296,6 +296,7 @@ def test_the_stop_widens_on_a_spread_scene_and_narrows_on_a_few_points(cube, tol
     assert weights.chosen["noise_estimate"] == pytest.approx(0.003, 0.05)
     assert ("stand-in: told" in stand_in.notes) == (few_points is not None)      # what the algorithm said, noted
     assert stand_in.rules.converge == pytest.approx(tolerance, rel=1e-12)
+    assert probed_tolerance(weights.chosen, 0.0025, CONVERGE, CONVERGE_WIDE) == stand_in.rules.converge   # the tools'
     assert weights.chosen["lit_voxels"] == pytest.approx(cube.sum() / cube.max() if cube.any() else cube.size)
     pixels = cube.shape[1] * cube.shape[2]
     assert weights.chosen["lit_per_pixel"] == pytest.approx(weights.chosen["lit_voxels"] / pixels)
@@ -372,6 +373,8 @@ def test_a_few_points_counted_again_as_lit_spots_tell_the_algorithm_and_take_bac
     assert weights.chosen["lit_voxels"] == pytest.approx(120, rel=1e-12)        # the first count is kept
     spots = lit >= SPOTS_FROM
     assert stand_in.rules.converge == pytest.approx(CONVERGE if spots else narrowed, rel=1e-12)
+    replayed = probed_tolerance(weights.chosen, 0.0025, CONVERGE, wide_stop, True) if wide_stop else CONVERGE
+    assert replayed == stand_in.rules.converge                                                         # the tools'
     assert stand_in.rerouted == (["stand-in: spots"] if spots else [])      # what the algorithm said
     said = [line for line in stand_in.notes if line.startswith("recount:") or "(lit spots)" in line]
     recounted = f"recount: lit spots, not a few points ({lit} lit voxels at iteration {RECOUNT_AT} ≥ {SPOTS_FROM})"
@@ -402,6 +405,8 @@ def test_a_few_points_to_lighten_counted_again_tell_the_algorithm_or_widen_the_s
     few = lit < SPOTS_FROM
     widened = CONVERGE * POINTS_IN_GOOD_LIGHT_STOP if wide_stop else CONVERGE
     assert stand_in.rules.converge == pytest.approx(narrowed if few else widened, rel=1e-12)
+    replayed = probed_tolerance(weights.chosen, 0.0025, CONVERGE, wide_stop, True) if wide_stop else CONVERGE
+    assert replayed == stand_in.rules.converge                                                         # the tools'
     assert stand_in.rerouted == (["stand-in: a few points to lighten"] if few else [])
     said = [line for line in stand_in.notes if line.startswith("recount:") or "(lit spots)" in line]
     recounted = (f"recount: a few points ({lit} lit voxels at iteration {RECOUNT_AT} < {SPOTS_FROM})" if few else
@@ -419,12 +424,15 @@ def test_a_few_points_to_lighten_counted_again_tell_the_algorithm_or_widen_the_s
     (True, SPOTS_FROM, False, 1.0),                                 # recounted lit spots: the untuned stop
 ])
 def test_probed_tolerance_reads_the_probe_and_the_recount(recounted, lit, good_light, share):
-    """The tolerance the tools replay, from a solve's attributes, is the one the hook sets before (``recounted``
-    False) and after the recount (the tests above: the same shares)."""
+    """The tolerance the tools replay, from a solve's attributes, before (``recounted`` False) and after the recount:
+    the shares the hook sets (the tests above also compare it with the hook's own); without the probe, the stop
+    untuned."""
     attrs = {"mean_over_peak": 0.001, "noise_estimate": 0.003 if good_light else 0.01, "lit_per_pixel": 0.02,
              "lit_voxels_recounted": lit}
     tolerance = probed_tolerance(attrs, 0.0025, CONVERGE, CONVERGE_WIDE, recounted)
     assert tolerance == pytest.approx(CONVERGE * share, rel=1e-12)
+    unprobed = {"noise_estimate": 0.003}
+    assert probed_tolerance(unprobed, 0.0025, CONVERGE, CONVERGE_WIDE, recounted) == CONVERGE      # no probe
 
 
 @pytest.mark.parametrize("point_like, lighter, spots, rerouted", [

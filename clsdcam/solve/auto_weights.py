@@ -226,7 +226,10 @@ def probed_tolerance(attrs: dict, point_like_below: float, converge: float, wide
     ``recounted`` (after RECOUNT_AT), lit spots found on a few points stop as a point-like scene that is not a few
     points, in good light on those to lighten (where the wider stop was judged), at ``converge`` on the others. Until
     the recount a few points to lighten take the narrower of their two stops, LIGHTER_FEW_POINTS_STOP·``converge``:
-    the stop's first reading comes at the recount's iteration, before it acts."""
+    the stop's first reading comes at the recount's iteration, before it acts. Where the probe did not measure, the
+    stop stays at ``converge``."""
+    if "mean_over_peak" not in attrs:
+        return converge
     point_like, few_points, lighter = probe_reading(attrs, point_like_below)
     spots = recounted and recount_reading(attrs)
     good_light = lighter if spots else in_good_light(attrs["noise_estimate"])
