@@ -74,7 +74,8 @@ def run_scene(plan: dict, args) -> dict:
     attrs, points = default_run(sim, args.iters)
     answer, before = points[-1], next(p for p in points if p["iteration"] >= points[-1]["iteration"] - SETTLED_OVER)
     point_like, few_points, lighter = probe_reading(attrs, POINT_LIKE_BELOW)
-    default = [probed_tolerance(attrs, POINT_LIKE_BELOW, CONVERGE, CONVERGE_WIDE, recounted) for recounted in (0, 1)]
+    default = [probed_tolerance(attrs, POINT_LIKE_BELOW, CONVERGE, CONVERGE_WIDE, recounted)
+               for recounted in (False, True)]
     return {**plan, "tv": attrs["tv_chosen"], "lit_voxels": attrs["lit_voxels"],
             "lit_per_pixel": attrs["lit_per_pixel"], "point_like": point_like, "few_points": few_points,
             "lighter": lighter, "noise": attrs["noise_estimate"],

@@ -70,7 +70,8 @@ from clsdcam.cli.options import WORK
 from clsdcam.errors import InputError
 from clsdcam.metrics import psnr, spectral_angle
 from clsdcam.render import new_figure
-from clsdcam.solve.auto_weights import AUTO_AT, RECOUNT_AT, probe_reading, recount_reroutes
+from clsdcam.solve.auto_weights import (AUTO_AT, RECOUNT_AT, probe_reading, recount_reroutes, tell_point_like,
+                                        tell_recount)
 from clsdcam.solve.convergence import DistanceEstimate
 from clsdcam.solve.solver import Settings
 
@@ -147,9 +148,9 @@ def told_point_like(point_like: bool = False, few_points: bool = False, lighter:
 
     def iterate(algorithm, problem):
         if algorithm._iterations == AUTO_AT:
-            algorithm.point_like(few_points and not lighter)
+            tell_point_like(algorithm, few_points, lighter)
         if algorithm._iterations == RECOUNT_AT and rerouted:
-            algorithm.few_points_to_lighten() if lighter else algorithm.lit_spots()
+            tell_recount(algorithm, lighter)
         return plain(algorithm, problem)
 
     Admm.iterate = iterate if point_like else plain

@@ -178,6 +178,19 @@ def recount_reroutes(attrs: dict, point_like_below: float) -> bool:
     return few_points and "lit_voxels_recounted" in attrs and recount_reading(attrs) != lighter
 
 
+def tell_point_like(algorithm, few_points: bool, lighter: bool) -> str | None:
+    """What the probe tells the algorithm of a point-like scene (``Algorithm.point_like``): whether it is one of
+    ``few_points``, unless it is one to make ``lighter``, told point-like until the recount. The algorithm's line."""
+    return algorithm.point_like(few_points and not lighter)
+
+
+def tell_recount(algorithm, lighter: bool) -> str | None:
+    """What a recount that changed the road (:func:`recount_reroutes`) tells the algorithm: a few points found on one
+    to make ``lighter`` (``Algorithm.few_points_to_lighten``), else lit spots found on a few points
+    (``Algorithm.lit_spots``). The algorithm's line."""
+    return algorithm.few_points_to_lighten() if lighter else algorithm.lit_spots()
+
+
 def widely_lit(attrs: dict, widely_lit_above: float) -> bool:
     """Whether the probe's p (``mean_over_peak``) is at least the algorithm's ``widely_lit_above``: a scene whose light
     spreads over the frame, where the weight rises in low light (``AutoWeight.for_noise``). False where the probe did
@@ -300,7 +313,7 @@ class AutoWeights:
                         f"residual at iteration {driver.iterations}{scene})")
         driver.rescore(problem.objective)
         if point_like:
-            driver.note(driver.algorithm.point_like(few_points and not lighter))
+            driver.note(tell_point_like(driver.algorithm, few_points, lighter))
         self._recount_due = few_points
         if self.wide_stop and "mean_over_peak" in self.chosen:
             self._tune_stop(driver, point_like, few_points, lighter)
@@ -346,8 +359,7 @@ class AutoWeights:
                     f"{SPOTS_FROM})" if spots else
                     f"recount: a few points ({n:.0f} lit voxels at iteration {driver.iterations} < {SPOTS_FROM})")
         if recount_reroutes(self.chosen, self.point_like_below):
-            lighter = probe_reading(self.chosen, self.point_like_below)[2]
-            driver.reroute(driver.algorithm.few_points_to_lighten() if lighter else driver.algorithm.lit_spots())
+            driver.reroute(tell_recount(driver.algorithm, probe_reading(self.chosen, self.point_like_below)[2]))
         if self._untuned is not None and spots:
             driver.widen_stop(probed_tolerance(self.chosen, self.point_like_below, self._untuned, self.wide_stop,
                                                recounted=True))
